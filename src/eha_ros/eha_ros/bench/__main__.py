@@ -1,0 +1,63 @@
+"""scripts/bench <name> [--out DIR] [--duration S]: run a benchmark, write out/bench/<name>.json."""
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib
+import json
+import os
+import pkgutil
+import platform
+import sys
+
+from ..core.cli import UsageError, guarded
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def available() -> list[str]:
+    return sorted(m.name for m in pkgutil.iter_modules([HERE]) if not m.name.startswith('_'))
+
+
+def write_json(path: str, data: dict):
+    """Atomic write: a reader never sees half a file."""
+    os.makedirs(os.path.dirname(path) or '.', exist_ok=True)
+    tmp = path + '.tmp'
+    with open(tmp, 'w') as fh:
+        json.dump(data, fh, indent=2, sort_keys=True)
+        fh.write('\n')
+    os.replace(tmp, path)
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    ap = argparse.ArgumentParser(prog='bench', description=__doc__.splitlines()[0])
+    ap.add_argument('name', help='benchmark: ' + ', '.join(available()))
+    ap.add_argument('--out', default='out/bench', help='output folder (default out/bench)')
+    ap.add_argument('--duration', type=float, default=None,
+                    help='measurement length in seconds where the benchmark has one')
+    args = ap.parse_args(argv)
+
+    def run():
+        if args.name not in available():
+            raise UsageError(f'unknown benchmark {args.name!r}: expected one of '
+                             f'{", ".join(available())}')
+        module = importlib.import_module(f'{__package__}.{args.name}')
+        print(f'bench {args.name}: running ...', file=sys.stderr, flush=True)
+        result = module.run(args)
+        result.update({'benchmark': args.name, 'cpu_cores': os.cpu_count(),
+                       'machine': platform.machine(), 'python': platform.python_version(),
+                       'command': 'scripts/bench ' + ' '.join(argv),
+                       'timestamp': datetime.datetime.now(datetime.timezone.utc).isoformat()})
+        path = os.path.join(args.out, f'{args.name}.json')
+        write_json(path, result)
+        for key in sorted(result):
+            print(f'{key}: {result[key]}')
+        print(f'bench {args.name}: wrote {path}')
+        return 0
+
+    return guarded('bench', run)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

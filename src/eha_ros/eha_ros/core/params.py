@@ -1,0 +1,292 @@
+"""Parameter schemas and the one loader for ROS params files (nodes and batch code alike).
+
+A params file is in the ROS 2 format::
+
+    /**:                       # applies to every node
+      ros__parameters:
+        plant: {pump: {D_p: 6.684e-7}}
+    controller:                # applies to the node named 'controller'
+      ros__parameters:
+        rate_limit: 0.19
+
+Nested mappings flatten to dotted names (``plant.pump.D_p``). Every error is a
+:class:`ParamError` whose text is one line naming the file, the key, the value and
+what was expected. No rclpy import here: nodes call :func:`load` with the files that
+rcl will also read, batch code calls it directly.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping, Sequence
+
+import yaml
+
+
+class ParamError(Exception):
+    """A configuration error; ``str(err)`` is one line fit for a user."""
+
+
+_REQUIRED = object()
+
+# Accepted type names and their Python checks. Integers are accepted for floats.
+_SCALAR = {
+    'float': (float, int),
+    'int': (int,),
+    'bool': (bool,),
+    'str': (str,),
+}
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: dotted name, type, SI unit, physical range and default."""
+
+    name: str
+    type: str = 'float'          # float | int | bool | str | float[] | int[] | str[]
+    unit: str = ''
+    default: Any = _REQUIRED
+    min: float | None = None
+    max: float | None = None
+    choices: tuple | None = None
+    doc: str = ''
+    min_len: int = 1             # arrays only
+
+    @property
+    def required(self) -> bool:
+        return self.default is _REQUIRED
+
+    def expected(self) -> str:
+        """Human description of what the value must be."""
+        text = self.type
+        if self.choices is not None:
+            text += ' one of ' + '|'.join(str(c) for c in self.choices)
+        if self.min is not None or self.max is not None:
+            lo = '-inf' if self.min is None else f'{self.min:g}'
+            hi = 'inf' if self.max is None else f'{self.max:g}'
+            text += f' in [{lo}, {hi}]'
+        if self.unit:
+            text += f' {self.unit}'
+        return text
+
+    def check(self, value: Any) -> Any:
+        """Return the value coerced to the declared type, or raise ValueError."""
+        if self.type.endswith('[]'):
+            base = self.type[:-2]
+            if not isinstance(value, (list, tuple)) or len(value) < self.min_len:
+                raise ValueError
+            return [self._check_scalar(base, v) for v in value]
+        return self._check_scalar(self.type, value)
+
+    def _check_scalar(self, base: str, value: Any) -> Any:
+        kinds = _SCALAR[base]
+        if isinstance(value, bool) and base != 'bool':
+            raise ValueError
+        if not isinstance(value, kinds):
+            raise ValueError
+        if base == 'float':
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError
+        if base in ('float', 'int'):
+            if self.min is not None and value < self.min:
+                raise ValueError
+            if self.max is not None and value > self.max:
+                raise ValueError
+        if self.choices is not None and value not in self.choices:
+            raise ValueError
+        return value
+
+
+@dataclass
+class Schema:
+    """The parameters one node (or batch tool) accepts."""
+
+    node: str
+    params: Sequence[Param]
+    by_name: dict = field(init=False, repr=False)
+
+    def __post_init__(self):
+        self.by_name = {p.name: p for p in self.params}
+        if len(self.by_name) != len(self.params):
+            raise ValueError(f'duplicate parameter in schema {self.node}')
+
+    def __add__(self, other: 'Schema') -> 'Schema':
+        return Schema(self.node, list(self.params) + list(other.params))
+
+    def defaults(self) -> dict:
+        return {p.name: p.default for p in self.params if not p.required}
+
+    def validate(self, values: Mapping[str, Any], sources: Mapping[str, str] | None = None,
+                 context: str = '') -> dict:
+        """Check values against the schema; fill defaults; return a new dict.
+
+        ``sources`` maps a key to where it came from (a file name) for the message;
+        ``context`` names the inputs as a whole for a missing key.
+        """
+        sources = sources or {}
+        out = {}
+        for key, value in values.items():
+            where = sources.get(key, context or 'parameters')
+            spec = self.by_name.get(key)
+            if spec is None:
+                raise ParamError(f'{where}: unknown parameter {key!r} = {value!r} for node '
+                                 f'{self.node!r}: expected one of the schema\'s keys '
+                                 f'({_near(key, self.by_name)})')
+            try:
+                out[key] = spec.check(value)
+            except ValueError:
+                raise ParamError(f'{where}: {key} = {value!r}: expected {spec.expected()}') \
+                    from None
+        for spec in self.params:
+            if spec.name in out:
+                continue
+            if spec.required:
+                raise ParamError(f'{context or "parameters"}: missing required parameter '
+                                 f'{spec.name!r} for node {self.node!r}: expected '
+                                 f'{spec.expected()}')
+            out[spec.name] = spec.default
+        return out
+
+
+def _near(key: str, names: Iterable[str]) -> str:
+    import difflib
+    close = difflib.get_close_matches(key, list(names), n=2, cutoff=0.6)
+    return 'did you mean ' + ' or '.join(close) + '?' if close else 'see config/README'
+
+
+def flatten(tree: Mapping, prefix: str = '') -> dict:
+    """Nested mappings to dotted keys, as rcl does for params files."""
+    out = {}
+    for key, value in tree.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            out.update(flatten(value, name + '.'))
+        else:
+            out[name] = value
+    return out
+
+
+def _section_matches(section: str, node: str, namespace: str) -> bool:
+    """Does a params-file top-level key apply to ``namespace``/``node``?"""
+    full = (namespace.rstrip('/') + '/' + node) if namespace not in ('', '/') else '/' + node
+    return section in ('/**', node, '/' + node, full, '/**/' + node) or \
+        (section.startswith('/**') and full.endswith(section[3:]) and section[3:].startswith('/'))
+
+
+def read_params_file(path: str, node: str, namespace: str = '/') -> dict:
+    """Read one ROS params file; return this node's flattened parameters (wildcards first)."""
+    try:
+        with open(path, encoding='utf-8') as fh:
+            text = fh.read()
+    except FileNotFoundError:
+        raise ParamError(f'{path}: cannot read parameter file: no such file') from None
+    except OSError as err:
+        raise ParamError(f'{path}: cannot read parameter file: {err.strerror}') from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, 'problem_mark', None)
+        where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
+        problem = getattr(err, 'problem', None) or str(err).splitlines()[0]
+        raise ParamError(f'{path}: malformed YAML{where}: {problem}: expected a ROS params file '
+                         f'(node: ros__parameters: ...)') from None
+    if doc is None:
+        return {}
+    if not isinstance(doc, Mapping):
+        raise ParamError(f'{path}: top level is {type(doc).__name__}: expected a mapping of '
+                         f'node names to ros__parameters')
+    values: dict = {}
+    # Wildcard sections first so that a node's own section overrides them.
+    ordered = sorted(doc.items(), key=lambda kv: 0 if str(kv[0]).startswith('/**') else 1)
+    for section, body in ordered:
+        if not _section_matches(str(section), node, namespace):
+            continue
+        if not isinstance(body, Mapping) or 'ros__parameters' not in body:
+            raise ParamError(f'{path}: section {section!r} = {body!r}: expected a mapping with '
+                             f'a ros__parameters key')
+        extra = [k for k in body if k != 'ros__parameters']
+        if extra:
+            raise ParamError(f'{path}: section {section!r} has key {extra[0]!r}: expected only '
+                             f'ros__parameters')
+        params = body['ros__parameters']
+        if params is None:
+            continue
+        if not isinstance(params, Mapping):
+            raise ParamError(f'{path}: {section}.ros__parameters = {params!r}: expected a mapping')
+        values.update(flatten(params))
+    return values
+
+
+# Parameters every rclpy node accepts; batch code ignores them.
+ROS_BUILTINS = ('use_sim_time', 'start_type_description_service')
+
+
+def load(schema: Schema, files: Sequence[str] = (), overrides: Mapping[str, Any] | None = None,
+         node: str | None = None, namespace: str = '/') -> dict:
+    """Merge params files (later wins) and overrides, validate, fill defaults."""
+    node = node or schema.node
+    values: dict = {}
+    sources: dict = {}
+    for path in files:
+        for key, value in read_params_file(path, node, namespace).items():
+            values[key] = value
+            sources[key] = path
+    for key, value in (overrides or {}).items():
+        values[key] = value
+        sources[key] = 'command line'
+    for key in ROS_BUILTINS:
+        values.pop(key, None)
+    context = ', '.join(files) if files else 'defaults'
+    return schema.validate(values, sources, context)
+
+
+def default_config_dir() -> str:
+    """The repository's config/ folder (or $EHA_CONFIG_DIR)."""
+    env = os.environ.get('EHA_CONFIG_DIR')
+    if env:
+        return env
+    here = os.path.dirname(os.path.abspath(__file__))
+    for up in (3, 4):
+        cand = os.path.normpath(os.path.join(here, *(['..'] * up), 'config'))
+        if os.path.isdir(cand):
+            return cand
+    return os.path.join(os.getcwd(), 'config')
+
+
+def parse_ros_args(argv: Sequence[str]) -> tuple[list[str], dict, str | None, str]:
+    """Pick params files, -p overrides, node-name and namespace remaps out of --ros-args."""
+    files: list[str] = []
+    overrides: dict = {}
+    name = None
+    namespace = '/'
+    in_ros = False
+    i = 0
+    while i < len(argv):
+        arg = argv[i]
+        if arg == '--ros-args':
+            in_ros = True
+        elif arg == '--':
+            in_ros = False
+        elif in_ros and arg == '--params-file' and i + 1 < len(argv):
+            files.append(argv[i + 1])
+            i += 1
+        elif in_ros and arg in ('-p', '--param') and i + 1 < len(argv):
+            key, sep, text = argv[i + 1].partition(':=')
+            if not sep:
+                raise ParamError(f'command line: -p {argv[i + 1]!r}: expected name:=value')
+            try:
+                overrides[key] = yaml.safe_load(text) if text else ''
+            except yaml.YAMLError:
+                overrides[key] = text
+            i += 1
+        elif in_ros and arg in ('-r', '--remap') and i + 1 < len(argv):
+            src, _, dst = argv[i + 1].partition(':=')
+            if src == '__node' or src.endswith(':__node'):
+                name = dst
+            elif src == '__ns' or src.endswith(':__ns'):
+                namespace = dst
+            i += 1
+        i += 1
+    return files, overrides, name, namespace

@@ -1,0 +1,180 @@
+"""Nonlinear dual-redundant single-piston EHA plant (ch. 3, Fig. 3.12), one call per 1 ms tick.
+
+The heavy lifting is in compiled kernels (:mod:`.integrator`, :mod:`.sensors`); this class
+holds the state arrays, the drive delay FIFO, channel selection, faults and the API.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import layout as L
+from . import sensors as SN
+from .accumulator import oil_volume
+from .drive import SpeedDelay
+from .faults import FaultSet
+from .integrator import tick
+from .parameters import PlantParams, leakage_table, pack
+
+
+@dataclass
+class Measurement:
+    """Measured state (what a real bench would see), SI units."""
+
+    t: float
+    position: float
+    motor_speed: np.ndarray
+    motor_current: np.ndarray
+    pressure_a: float
+    pressure_b: float
+    active_channel: int
+    valve_open: np.ndarray          # opening fractions 0..1
+    drive_enabled: np.ndarray       # bool (2,)
+    drive_fault: np.ndarray         # bool (2,)
+    valid: bool
+
+
+@dataclass
+class Truth:
+    """True plant state, SI units; pressures gauge."""
+
+    t: float
+    position: float
+    velocity: float
+    pressure_a: float
+    pressure_b: float
+    pressure_acc: float
+    motor_speed: np.ndarray
+    motor_current: np.ndarray
+    friction_force: float
+    load_force: float
+    valve_fraction: np.ndarray
+    bypass_fraction: float
+
+
+class EhaPlant:
+    """EHA plant: ``step(omega_ref, load_force)`` advances one tick Ts.
+
+    omega_ref (rad/s) goes, through the drive delay FIFO, to every enabled drive; load_force
+    (N) follows eq. 3.23/3.32 (positive pushes towards negative x). Non-finite inputs raise
+    ValueError and leave the state untouched.
+    """
+
+    def __init__(self, params: dict, seed: int = 0):
+        self.p = PlantParams.from_dict(params)
+        self.Ts = self.p.Ts
+        self._P = pack(self.p)
+        self._nsub = self.p.substeps
+        self._T = leakage_table(self.p)
+        self._seed = seed
+        self.faults = FaultSet()
+        self.reset()
+
+    # ------------------------------------------------------------------ set-up
+    def reset(self, position: float = 0.0) -> None:
+        """Rest state at ``position`` (m): pressures at the accumulator pressure, channel 0
+        active (drive 0 enabled, valves 0 open), channel 1 standby; faults cleared."""
+        if not math.isfinite(position) or abs(position) > self.p.x_stop:
+            raise ValueError(f'reset position {position!r} m: expected within +-{self.p.x_stop}')
+        p = self.p
+        self.t = 0.0
+        self.S = np.zeros(L.NSTATE)
+        self.S[L.S_X] = position
+        self.S[L.S_PACC] = p.acc_p_init
+        self.S[L.S_VOIL] = oil_volume(p.acc_p_init, p.acc_V_0, p.acc_P_0, p.p_atm)
+        self.S[L.S_PA] = self.S[L.S_PB] = p.acc_p_init
+        self.U = np.zeros(L.NIN)
+        self.U[L.U_LEAK0] = self.U[L.U_LEAK1] = 1.0
+        self.active_channel = 0
+        self.select(0, (True, False), (True, False), False)
+        self.S[L.S_CH + L.C_FV] = 1.0           # valves 0 already open at start
+        self._delay = SpeedDelay(p.delay_ticks)
+        self._noise = SN.NoiseSource(self._seed)
+        self._meas = np.zeros(L.NM)
+        self._valid = True
+        self.faults.clear()
+        self._faulted = False
+        self._sample()
+
+    def select(self, channel: int, drive_enable=(True, False), valve_open=(True, False),
+               bypass_open: bool = False) -> None:
+        """Channel selection (/eha/channel_select): drive enables, on-off valve and bypass
+        targets; valves move over their opening time."""
+        if channel not in (0, 1):
+            raise ValueError(f'channel {channel!r}: expected 0 or 1')
+        self.active_channel = int(channel)
+        for c in range(2):
+            self.U[L.U_EN0 + c] = 1.0 if drive_enable[c] else 0.0
+            self.U[L.U_VT0 + c] = 1.0 if valve_open[c] else 0.0
+        self.U[L.U_BT] = 1.0 if bypass_open else 0.0
+
+    def inject_fault(self, name: str, channel: int, magnitude: float, duration: float):
+        """Inject a fault (see faults.FAULTS); returns (ok, message)."""
+        return self.faults.inject(name, channel, magnitude, duration, self.t)
+
+    # ------------------------------------------------------------------ run
+    def step(self, omega_ref: float, load_force: float = 0.0) -> None:
+        """Apply the speed reference and load force, advance one tick, sample the sensors."""
+        omega_ref = float(omega_ref)
+        load_force = float(load_force)
+        if not (math.isfinite(omega_ref) and math.isfinite(load_force)):
+            raise ValueError(f'non-finite plant input omega_ref={omega_ref!r}, '
+                             f'load_force={load_force!r}: expected finite numbers')
+        self.U[L.U_WREF] = self._delay.push(omega_ref)
+        self.U[L.U_FL] = load_force
+        if self.faults.active or self._faulted:
+            self.faults.apply(self.t, self.U)
+            self._faulted = bool(self.faults.active)
+        row = self._noise.next_index()
+        if not tick(self.S, self._P, self.U, self._T, self._nsub, self._noise.block, row,
+                    self._meas):
+            self._valid = False         # state restored by tick(); never keeps NaN
+        self.t += self.Ts
+
+    def run(self, omega_ref, load_force=None) -> np.ndarray:
+        """Batch helper: step through arrays of inputs; returns the true positions."""
+        omega_ref = np.asarray(omega_ref, float)
+        load = np.zeros_like(omega_ref) if load_force is None else np.asarray(load_force, float)
+        out = np.empty(len(omega_ref))
+        for k in range(len(omega_ref)):
+            self.step(omega_ref[k], load[k])
+            out[k] = self.S[L.S_X]
+        return out
+
+    def _sample(self):
+        SN.sample(self.S, self._P, self.U, self._noise.block[self._noise.next_index()],
+                  self._meas)
+
+    # ------------------------------------------------------------------ outputs
+    def measure(self) -> Measurement:
+        m = self._meas
+        fail = self.U[[L.U_FAIL0, L.U_FAIL1]] > 0.5
+        return Measurement(
+            t=self.t, position=float(m[L.M_X]),
+            motor_speed=m[[L.M_W0, L.M_W1]].copy(),
+            motor_current=m[[L.M_I0, L.M_I1]].copy(),
+            pressure_a=float(m[L.M_PA]), pressure_b=float(m[L.M_PB]),
+            active_channel=self.active_channel,
+            valve_open=self._channel(L.C_FV),
+            drive_enabled=self.U[[L.U_EN0, L.U_EN1]] > 0.5,
+            drive_fault=fail, valid=self._valid)
+
+    def truth(self) -> Truth:
+        S = self.S
+        return Truth(
+            t=self.t, position=float(S[L.S_X]), velocity=float(S[L.S_V]),
+            pressure_a=float(S[L.S_PA]), pressure_b=float(S[L.S_PB]),
+            pressure_acc=float(S[L.S_PACC]), motor_speed=self._channel(L.C_W),
+            motor_current=self._channel(L.C_I), friction_force=float(S[L.S_FF]),
+            load_force=float(self.U[L.U_FL]), valve_fraction=self._channel(L.C_FV),
+            bypass_fraction=float(S[L.S_FB]))
+
+    def _channel(self, offset):
+        return np.array([self.S[L.S_CH + offset], self.S[L.S_CH + L.NCH + offset]])
+
+    @property
+    def position(self) -> float:
+        """True piston position (m), cheap accessor for batch loops."""
+        return float(self.S[L.S_X])

@@ -1,0 +1,368 @@
+"""Plant parameter schema (Tables 3.7, 3.8, 4.5, appendix D.1) and the frozen parameter set.
+
+Every ``plant.*`` parameter is declared here with type, SI unit, physical range and default
+(the actuator's identity -- A_p, V_d, m_p, stroke, D_p, k_T, beta -- has none: a plant file
+must state it);
+``config/plant.yaml`` repeats them with their thesis source. :class:`PlantParams` is the
+validated, typed view that the model and the linear models use, and :func:`pack` turns it into
+the flat float64 vector the compiled kernels read (indices in :mod:`.layout`).
+
+Decided choices (thesis inconsistencies, see DESIGN.md):
+- beta = 1.379e9 Pa (Table 3.8; Table 4.5's 1.379e7 is a typo, D.1 uses 1.355e9).
+- b_eq = 4.26e-3 Nm/(rad/s) (appendix D.1; Table 3.8's "100" is a typo).
+- V_d = 4.01e-4 m^3 (Table 3.8; D.1 computes A_p*0.12*1.3 = 4.01e-4 too).
+- C_eq = C_p + C_c + C_r/2 = 3.8e-12 m^3/(s Pa) (eq. 3.22 and Table 3.8), split as
+  C_p = 1.5e-12, C_c = 0.5e-12, C_r = 3.6e-12 (the split is not given in the thesis).
+- k_E = 0.53 V/(rad/s) (Table 4.5 / D.1).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from ..params import Param, ParamError, Schema
+from . import layout as L
+
+RPM = 2.0 * math.pi / 60.0
+BAR = 1.0e5
+
+
+def _synthetic_eta_table():
+    """Synthetic volumetric-efficiency map eta_v(omega, p_D) (eq. 3.31), NOT measured data.
+
+    Built from a total leakage coefficient that rises linearly from 0.8 to 1.2 times
+    C_p + C_r = 5.1e-12 m^3/(s Pa) between 0 and 250 bar, so its average over 50-250 bar is
+    close to the linearisation used by the linear models; clipped to [0.05, 1].
+    """
+    omegas = [50.0, 100.0, 200.0, 400.0, 600.0, 838.0]
+    pds = [0.0, 50 * BAR, 100 * BAR, 150 * BAR, 200 * BAR, 250 * BAR]
+    d_p, c_tot = 6.684e-7, 5.1e-12
+    table = []
+    for w in omegas:
+        for p in pds:
+            c = c_tot * (0.8 + 0.4 * p / (250 * BAR))
+            table.append(round(min(1.0, max(0.05, 1.0 - c * p / (d_p * w))), 5))
+    return omegas, pds, table
+
+
+_ETA_W, _ETA_P, _ETA = _synthetic_eta_table()
+
+P = 'plant.'
+PLANT_SCHEMA = Schema('plant_sim', [
+    # numerics
+    Param(P + 'sim.Ts', 'float', 's', 1.0e-3, 1.0e-4, 1.0e-2, doc='tick (sample) period'),
+    Param(P + 'sim.substeps', 'int', '', 16, 1, 4096,
+          doc='integration sub-steps per tick; a multiple of Ts/drive.period'),
+    Param(P + 'sim.theta', 'float', '', 0.5, 0.5, 1.0,
+          doc='theta-method weight of the linear hydro-mechanical terms (0.5 trapezoidal)'),
+    Param(P + 'sim.theta_stiff', 'float', '', 1.0, 0.5, 1.0,
+          doc='theta-method weight of friction and end-stop forces (1 = backward Euler)'),
+    Param(P + 'sim.newton_max_iter', 'int', '', 8, 1, 50),
+    Param(P + 'sim.newton_tol', 'float', '', 1.0e-5, 1.0e-16, 1.0e-3,
+          doc='Newton stop: scaled last step (p/1e7 Pa, v/0.1 m/s); quadratic convergence '
+              'leaves an error ~tol^2'),
+    # fluid and cylinder
+    Param(P + 'fluid.beta', 'float', 'Pa', min=1.0e8, max=5.0e9, doc='Table 3.8'),
+    Param(P + 'cylinder.A_p', 'float', 'm^2', min=1e-5, max=1e-1, doc='Table 3.8'),
+    Param(P + 'cylinder.V_d', 'float', 'm^3', min=1e-6, max=1e-1, doc='Table 3.8'),
+    Param(P + 'cylinder.m_p', 'float', 'kg', min=0.01, max=1000.0, doc='Table 3.8'),
+    Param(P + 'cylinder.C_c', 'float', 'm^3/(s Pa)', 0.5e-12, 0.0, 1e-9,
+          doc='cross-piston leakage; share of C_eq (choice)'),
+    Param(P + 'cylinder.stroke', 'float', 'm', min=1e-3, max=2.0, doc='Table 3.1'),
+    Param(P + 'cylinder.stop_k', 'float', 'N/m', 1.0e8, 1e4, 1e11, doc='end-stop stiffness'),
+    Param(P + 'cylinder.stop_c', 'float', 'N/(m/s)', 2.0e4, 0.0, 1e8, doc='end-stop damping'),
+    # friction, Table 3.7, eq. 3.33
+    Param(P + 'friction.model', 'str', '', 'stribeck', choices=('stribeck', 'viscous', 'none')),
+    Param(P + 'friction.F_c', 'float', 'N', 450.0, 0.0, 1e5),
+    Param(P + 'friction.F_s', 'float', 'N', 800.0, 0.0, 1e5),
+    Param(P + 'friction.v_s', 'float', 'm/s', 0.03, 1e-5, 10.0),
+    Param(P + 'friction.mu', 'float', 'N/(m/s)', 1120.0, 0.0, 1e6),
+    # pump, eq. 3.15/3.31
+    Param(P + 'pump.D_p', 'float', 'm^3/rad', min=1e-9, max=1e-4, doc='Table 3.8'),
+    Param(P + 'pump.C_p', 'float', 'm^3/(s Pa)', 1.5e-12, 0.0, 1e-9, doc='cross-port leakage'),
+    Param(P + 'pump.C_r', 'float', 'm^3/(s Pa)', 3.6e-12, 0.0, 1e-9,
+          doc='per-port external leakage to the accumulator circuit'),
+    Param(P + 'pump.leakage_model', 'str', '', 'linear', choices=('linear', 'table')),
+    Param(P + 'pump.eta_v_omega', 'float[]', 'rad/s', _ETA_W, 0.0, 1e4, min_len=2),
+    Param(P + 'pump.eta_v_pd', 'float[]', 'Pa', _ETA_P, 0.0, 1e9, min_len=2),
+    Param(P + 'pump.eta_v', 'float[]', '', _ETA, 0.0, 1.0, min_len=4,
+          doc='row-major [omega][p_D] volumetric efficiency (synthetic default)'),
+    # motor, eq. 3.10-3.14
+    Param(P + 'motor.model', 'str', '', 'dc', choices=('dc', 'dq')),
+    Param(P + 'motor.R', 'float', 'ohm', 0.45, 1e-4, 100.0),
+    Param(P + 'motor.L', 'float', 'H', 2.1e-3, 1e-6, 1.0),
+    Param(P + 'motor.k_T', 'float', 'Nm/A', min=1e-3, max=100.0),
+    Param(P + 'motor.k_E', 'float', 'V/(rad/s)', 0.53, 1e-3, 100.0, doc='Table 4.5'),
+    Param(P + 'motor.J_eq', 'float', 'kg m^2', 5.93e-4, 1e-7, 10.0),
+    Param(P + 'motor.b_eq', 'float', 'Nm/(rad/s)', 4.26e-3, 0.0, 10.0, doc='appendix D.1'),
+    Param(P + 'motor.n_p', 'int', '', 5, 1, 64, doc='pole pairs (dq model)'),
+    Param(P + 'motor.L_d', 'float', 'H', 2.1e-3, 1e-6, 1.0),
+    Param(P + 'motor.L_q', 'float', 'H', 2.1e-3, 1e-6, 1.0),
+    # drive, eq. 3.34, 4.65, 4.71
+    Param(P + 'drive.period', 'float', 's', 62.5e-6, 1e-6, 1e-3, doc='current/speed loop period'),
+    Param(P + 'drive.Kp_i', 'float', 'V/A', 11.3, 0.0, 1e4),
+    Param(P + 'drive.Ki_i', 'float', 'V/(A s)', 14125.0, 0.0, 1e8),
+    Param(P + 'drive.Kp_w', 'float', 'Nm/(rad/s)', 0.45, 0.0, 1e3),
+    Param(P + 'drive.Ki_w', 'float', 'Nm/rad', 56.0, 0.0, 1e6),
+    Param(P + 'drive.lowpass_w', 'float', 'rad/s', 2555.0, 1.0, 1e6),
+    Param(P + 'drive.V_max', 'float', 'V', 480.0, 1.0, 1e4),
+    Param(P + 'drive.I_max', 'float', 'A', 36.0, 0.1, 1e4),
+    Param(P + 'drive.omega_max', 'float', 'rad/s', 8000 * RPM, 1.0, 1e5),
+    Param(P + 'drive.delay', 'float', 's', 1.0e-3, 0.0, 0.1, doc='whole ticks'),
+    # accumulator, eq. 3.18
+    Param(P + 'accumulator.V_0', 'float', 'm^3', 6.0e-3, 1e-5, 1.0),
+    Param(P + 'accumulator.P_0', 'float', 'Pa', 8.0e5, 0.0, 1e8, doc='pre-charge, gauge'),
+    Param(P + 'accumulator.p_init', 'float', 'Pa', 10.0e5, 0.0, 1e8, doc='initial, gauge'),
+    Param(P + 'accumulator.p_atm', 'float', 'Pa', 101325.0, 0.0, 2e5),
+    # valves
+    Param(P + 'valves.check_K', 'float', 'm^3/(s Pa)', 1.0e-9, 1e-14, 1e-5),
+    Param(P + 'valves.check_crack', 'float', 'Pa', 0.3e5, 0.0, 1e7),
+    Param(P + 'valves.relief_crack', 'float', 'Pa', 255e5, 1e5, 1e9, doc='Table 3.2'),
+    Param(P + 'valves.relief_K', 'float', 'm^3/(s Pa)', 5.0e-10, 1e-14, 1e-5),
+    Param(P + 'valves.band', 'float', 'Pa', 0.05e5, 1.0, 1e6,
+          doc='width of the smooth opening of check and relief valves'),
+    Param(P + 'valves.onoff_time', 'float', 's', 0.02, 0.0, 10.0),
+    Param(P + 'valves.bypass_time', 'float', 's', 0.02, 0.0, 10.0),
+    Param(P + 'valves.bypass_K', 'float', 'm^3/(s Pa)', 1.0e-9, 0.0, 1e-5),
+    # sensors (thesis 4.1.2, Fig 4.6)
+    Param(P + 'sensors.noise', 'bool', '', True),
+    Param(P + 'sensors.position_sigma', 'float', 'm', 10e-6, 0.0, 1e-2),
+    Param(P + 'sensors.position_gm_sigma', 'float', 'm', 20e-6, 0.0, 1e-2),
+    Param(P + 'sensors.position_gm_corner', 'float', 'Hz', 1.0, 1e-3, 1e3),
+    Param(P + 'sensors.position_resolution', 'float', 'm', 1e-6, 0.0, 1e-2),
+    Param(P + 'sensors.speed_sigma', 'float', 'rad/s', 0.1, 0.0, 100.0),
+    Param(P + 'sensors.current_sigma', 'float', 'A', 0.02, 0.0, 10.0),
+    Param(P + 'sensors.pressure_sigma', 'float', 'Pa', 0.316 * BAR, 0.0, 1e7),
+])
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Typed, validated plant parameters (SI units); build with :meth:`from_dict`."""
+
+    Ts: float
+    substeps: int
+    theta: float
+    theta_stiff: float
+    newton_max_iter: int
+    newton_tol: float
+    beta: float
+    A_p: float
+    V_d: float
+    m_p: float
+    C_c: float
+    stroke: float
+    stop_k: float
+    stop_c: float
+    friction_model: str
+    F_c: float
+    F_s: float
+    v_s: float
+    mu: float
+    D_p: float
+    C_p: float
+    C_r: float
+    leakage_model: str
+    eta_v_omega: tuple
+    eta_v_pd: tuple
+    eta_v: tuple
+    motor_model: str
+    R: float
+    L: float
+    k_T: float
+    k_E: float
+    J_eq: float
+    b_eq: float
+    n_p: int
+    L_d: float
+    L_q: float
+    drive_period: float
+    Kp_i: float
+    Ki_i: float
+    Kp_w: float
+    Ki_w: float
+    lowpass_w: float
+    V_max: float
+    I_max: float
+    omega_max: float
+    delay: float
+    acc_V_0: float
+    acc_P_0: float
+    acc_p_init: float
+    p_atm: float
+    check_K: float
+    check_crack: float
+    relief_crack: float
+    relief_K: float
+    band: float
+    onoff_time: float
+    bypass_time: float
+    bypass_K: float
+    sensor_noise: bool
+    position_sigma: float
+    position_gm_sigma: float
+    position_gm_corner: float
+    position_resolution: float
+    speed_sigma: float
+    current_sigma: float
+    pressure_sigma: float
+
+    @property
+    def C_eq(self) -> float:
+        """Total leakage coefficient of eq. 3.22: C_p + C_c + C_r/2."""
+        return self.C_p + self.C_c + 0.5 * self.C_r
+
+    @property
+    def lambda_m(self) -> float:
+        """PM flux linkage consistent with k_T = 1.5 n_p lambda_m (eq. 3.12 vs 3.13)."""
+        return self.k_T / (1.5 * self.n_p)
+
+    @property
+    def b(self) -> float:
+        """Linear viscous piston damping of eq. 3.23 (= mu of eq. 3.33, 1120 in Table 3.8)."""
+        return self.mu
+
+    @property
+    def x_stop(self) -> float:
+        """End-stop position (half stroke, x = 0 mid-stroke)."""
+        return 0.5 * self.stroke
+
+    @property
+    def drive_ratio(self) -> int:
+        """Drive samples per tick."""
+        return int(round(self.Ts / self.drive_period))
+
+    @property
+    def delay_ticks(self) -> int:
+        return int(round(self.delay / self.Ts))
+
+    @classmethod
+    def from_dict(cls, values: dict) -> 'PlantParams':
+        """Build from ``load(PLANT_SCHEMA, files)``; checks cross-parameter consistency."""
+        # validate (fills defaults, one-line error for a missing identity parameter)
+        v = PLANT_SCHEMA.validate({k: x for k, x in values.items() if k.startswith(P)},
+                                  context='plant parameters')
+        names = {f.name for f in fields(cls)}
+        out = {}
+        for key, value in v.items():
+            if not key.startswith(P):
+                continue
+            group, _, leaf = key[len(P):].partition('.')
+            name = _FIELD.get((group, leaf), leaf)
+            if name not in names:
+                raise ParamError(f'parameters: unknown plant parameter {key!r}')
+            out[name] = tuple(value) if isinstance(value, list) else value
+        p = cls(**out)
+        p._check()
+        return p
+
+    def _check(self):
+        ratio = self.Ts / self.drive_period
+        if abs(ratio - round(ratio)) > 1e-9 or self.substeps % int(round(ratio)):
+            raise ParamError(f'parameters: plant.sim.substeps = {self.substeps} with '
+                             f'plant.drive.period = {self.drive_period:g}: expected Ts/period '
+                             f'an integer that divides substeps')
+        n_w, n_p = len(self.eta_v_omega), len(self.eta_v_pd)
+        if len(self.eta_v) != n_w * n_p:
+            raise ParamError(f'parameters: plant.pump.eta_v has {len(self.eta_v)} values: '
+                             f'expected len(eta_v_omega)*len(eta_v_pd) = {n_w * n_p}')
+        for key, arr in (('eta_v_omega', self.eta_v_omega), ('eta_v_pd', self.eta_v_pd)):
+            if any(b <= a for a, b in zip(arr, arr[1:])):
+                raise ParamError(f'parameters: plant.pump.{key} = {list(arr)}: expected '
+                                 f'strictly increasing values')
+        if self.F_s < self.F_c:
+            raise ParamError(f'parameters: plant.friction.F_s = {self.F_s}: expected >= '
+                             f'F_c = {self.F_c}')
+        if abs(self.delay / self.Ts - round(self.delay / self.Ts)) > 1e-6:
+            raise ParamError(f'parameters: plant.drive.delay = {self.delay}: expected a whole '
+                             f'number of ticks of {self.Ts} s')
+        if self.acc_p_init <= self.acc_P_0:
+            raise ParamError(f'parameters: plant.accumulator.p_init = {self.acc_p_init}: '
+                             f'expected above the pre-charge P_0 = {self.acc_P_0}')
+
+
+_FIELD = {
+    ('sim', 'Ts'): 'Ts', ('sim', 'substeps'): 'substeps',
+    ('friction', 'model'): 'friction_model', ('pump', 'leakage_model'): 'leakage_model',
+    ('motor', 'model'): 'motor_model', ('drive', 'period'): 'drive_period',
+    ('drive', 'delay'): 'delay',
+    ('accumulator', 'V_0'): 'acc_V_0', ('accumulator', 'P_0'): 'acc_P_0',
+    ('accumulator', 'p_init'): 'acc_p_init', ('accumulator', 'p_atm'): 'p_atm',
+    ('sensors', 'noise'): 'sensor_noise',
+}
+
+
+def pack(p: PlantParams) -> np.ndarray:
+    """Flat float64 parameter vector for the compiled kernels (indices in layout)."""
+    v = np.zeros(L.NPAR)
+    h = p.Ts / p.substeps
+    fric = {'none': 0, 'viscous': 1, 'stribeck': 2}[p.friction_model]
+    vals = {
+        L.P_H: h, L.P_THETA: p.theta, L.P_THETA_STIFF: p.theta_stiff, L.P_NEWTON_N: p.newton_max_iter,
+        L.P_NEWTON_TOL: p.newton_tol, L.P_DRIVE_EVERY: p.substeps // p.drive_ratio,
+        L.P_BETA: p.beta, L.P_AP: p.A_p, L.P_VD: p.V_d, L.P_MP: p.m_p, L.P_CC: p.C_c,
+        L.P_XSTOP: p.x_stop, L.P_KSTOP: p.stop_k, L.P_CSTOP: p.stop_c,
+        L.P_FRIC: fric, L.P_FC: p.F_c, L.P_FS: p.F_s, L.P_VS: p.v_s, L.P_MU: p.mu,
+        L.P_DP: p.D_p, L.P_CP: p.C_p, L.P_CR: p.C_r,
+        L.P_LEAK_TABLE: 1.0 if p.leakage_model == 'table' else 0.0,
+        L.P_DQ: 1.0 if p.motor_model == 'dq' else 0.0,
+        L.P_R: p.R, L.P_L: p.L, L.P_KT: p.k_T, L.P_KE: p.k_E, L.P_J: p.J_eq, L.P_BEQ: p.b_eq,
+        L.P_NP: p.n_p, L.P_LD: p.L_d, L.P_LQ: p.L_q, L.P_LAMBDA: p.lambda_m,
+        L.P_TD: p.drive_period, L.P_KPI: p.Kp_i, L.P_KII: p.Ki_i, L.P_KPW: p.Kp_w,
+        L.P_KIW: p.Ki_w, L.P_LPW: p.lowpass_w, L.P_VMAX: p.V_max, L.P_IMAX: p.I_max,
+        L.P_WMAX: p.omega_max,
+        L.P_ACC_V0: p.acc_V_0, L.P_ACC_P0: p.acc_P_0, L.P_PATM: p.p_atm,
+        L.P_CHECK_K: p.check_K, L.P_CHECK_CRACK: p.check_crack,
+        L.P_RELIEF_CRACK: p.relief_crack, L.P_RELIEF_K: p.relief_K,
+        L.P_ONOFF_RATE: h / p.onoff_time if p.onoff_time > 0 else 1.0,
+        L.P_BYPASS_RATE: h / p.bypass_time if p.bypass_time > 0 else 1.0,
+        L.P_BYPASS_K: p.bypass_K, L.P_VALVE_BAND: p.band,
+        L.P_EXP_RL: math.exp(-p.R * h / p.L), L.P_EXP_LP: math.exp(-p.lowpass_w * p.drive_period),
+        L.P_X_SIGMA: p.position_sigma, L.P_GM_SIGMA: p.position_gm_sigma,
+        L.P_GM_A: math.exp(-2.0 * math.pi * p.position_gm_corner * p.Ts),
+        L.P_X_RES: p.position_resolution, L.P_W_SIGMA: p.speed_sigma,
+        L.P_I_SIGMA: p.current_sigma, L.P_PR_SIGMA: p.pressure_sigma,
+        L.P_NOISE_ON: 1.0 if p.sensor_noise else 0.0,
+    }
+    for k, val in vals.items():
+        v[k] = float(val)
+    return v
+
+
+def leakage_table(p: PlantParams) -> np.ndarray:
+    """Total pump leakage coefficient map C(|omega|, |p_D|) from eta_v (eq. 3.31).
+
+    C = D_p |omega| (1 - eta_v) / p_D; at p_D = 0 the coefficient of the next pressure column
+    is used (the flow there is zero anyway). Returned as one array T of shape (n_w+1, n_p+1):
+    T[0, 1:] = p_D grid, T[1:, 0] = omega grid, T[1:, 1:] = C.
+    """
+    w = np.asarray(p.eta_v_omega, float)
+    pd = np.asarray(p.eta_v_pd, float)
+    eta = np.asarray(p.eta_v, float).reshape(len(w), len(pd))
+    c = np.zeros_like(eta)
+    for j, pj in enumerate(pd):
+        if pj > 0:
+            c[:, j] = p.D_p * w * (1.0 - eta[:, j]) / pj
+    for j, pj in enumerate(pd):
+        if pj <= 0:
+            c[:, j] = c[:, j + 1] if j + 1 < len(pd) else 0.0
+    table = np.zeros((len(w) + 1, len(pd) + 1))
+    table[0, 1:] = pd
+    table[1:, 0] = w
+    table[1:, 1:] = c
+    return table
+
+
+def plant_file() -> str:
+    """The shipped plant parameter file, config/plant.yaml (or $EHA_CONFIG_DIR/plant.yaml)."""
+    import os
+    from ..params import default_config_dir
+    return os.path.join(default_config_dir(), 'plant.yaml')
+
+
+def nominal_plant(overrides: dict | None = None) -> dict:
+    """Loaded and validated plant parameters from :func:`plant_file` plus overrides."""
+    from ..params import load
+    return load(PLANT_SCHEMA, [plant_file()], overrides or {})

@@ -1,0 +1,23 @@
+"""Parameters of the plant_sim node: the plant model's plant.* set plus the node's sim_node.*."""
+from __future__ import annotations
+
+from .params import Param, Schema
+from .plant.parameters import PLANT_SCHEMA
+
+NODE = Schema('plant_sim', [
+    Param('sim_node.seed', 'int', '', 0, 0, 2**31 - 1, doc='noise generator seed'),
+    Param('sim_node.lockstep', 'bool', '', False,
+          doc='step only when the command of the previous state arrived; publish /clock'),
+    Param('sim_node.lockstep_timeout', 'float', 's', 1.0, 1e-3, 60.0,
+          doc='lock-step: step anyway (and count a missed command) after this wall time'),
+    Param('sim_node.initial_position', 'float', 'm', 0.0, -0.06, 0.06),
+    Param('sim_node.command_timeout', 'float', 's', 0.05, 1e-3, 10.0,
+          doc='no command for this long: speed reference goes to zero and is reported'),
+    Param('sim_node.max_abs_speed_ref', 'float', 'rad/s', 838.0, 1.0, 5000.0,
+          doc='commands beyond this magnitude are saturated and counted'),
+    Param('sim_node.max_abs_load', 'float', 'N', 2.0e5, 0.0, 1.0e7,
+          doc='load forces beyond this magnitude are saturated and counted'),
+    Param('sim_node.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+])
+
+SCHEMA = PLANT_SCHEMA + NODE

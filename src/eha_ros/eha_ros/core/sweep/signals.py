@@ -1,0 +1,159 @@
+"""Test reference signals: stepped sine like the TwinCAT Fr_Test block (appendix B.1), chirp, step.
+
+Each signal is a plan that maps a tick index to a reference, so a node (one tick at a time)
+and batch code (whole arrays) produce the identical signal.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..cli import UsageError
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One frequency of a stepped sine: relax (zero) then ``periods`` whole periods of sine."""
+
+    freq_hz: float
+    start: int          # tick where the sine starts
+    stop: int           # tick after the last sine sample
+    relax_start: int    # tick where the relax (zero output) before it starts
+
+
+@dataclass
+class SteppedSine:
+    """Fr_Test: start frequency, increment, max frequency, periods per frequency, relax time."""
+
+    start_hz: float
+    increment_hz: float
+    max_hz: float
+    periods: int
+    relax_s: float
+    amplitude: float
+    offset: float = 0.0
+    Ts: float = 1e-3
+    segments: list = field(init=False)
+
+    def __post_init__(self):
+        freqs = []
+        f = self.start_hz
+        while f <= self.max_hz + 1e-9:          # Fr_Test: next frequency while <= max_freq
+            freqs.append(round(f, 9))
+            f += self.increment_hz
+        k = 0
+        self.segments = []
+        for f in freqs:
+            relax = int(round(self.relax_s / self.Ts))
+            n = int(round(self.periods / f / self.Ts))
+            self.segments.append(Segment(f, k + relax, k + relax + n, k))
+            k += relax + n
+        self.n_ticks = k + int(round(self.relax_s / self.Ts))
+
+    def value(self, k: int) -> float:
+        """Reference at tick k (the sine restarts at phase 0 for every frequency)."""
+        for seg in self.segments:
+            if seg.start <= k < seg.stop:
+                return self.offset + self.amplitude * math.sin(
+                    2.0 * math.pi * seg.freq_hz * (k - seg.start) * self.Ts)
+        return self.offset
+
+    def array(self) -> np.ndarray:
+        out = np.full(self.n_ticks, self.offset)
+        for seg in self.segments:
+            k = np.arange(seg.start, seg.stop)
+            out[k] += self.amplitude * np.sin(2.0 * np.pi * seg.freq_hz * (k - seg.start) * self.Ts)
+        return out
+
+    def segment_at(self, k: int):
+        for i, seg in enumerate(self.segments):
+            if seg.relax_start <= k < seg.stop:
+                return i
+        return None
+
+
+@dataclass
+class Chirp:
+    """Logarithmic chirp f0 -> f1 over ``duration`` with raised-cosine fade-in/out."""
+
+    f0_hz: float
+    f1_hz: float
+    duration_s: float
+    amplitude: float
+    offset: float = 0.0
+    fade_s: float = 0.5
+    Ts: float = 1e-3
+
+    def __post_init__(self):
+        self.n_ticks = int(round(self.duration_s / self.Ts))
+
+    def array(self) -> np.ndarray:
+        t = np.arange(self.n_ticks) * self.Ts
+        T = self.duration_s
+        ratio = self.f1_hz / self.f0_hz
+        phase = 2 * np.pi * self.f0_hz * T / np.log(ratio) * (ratio ** (t / T) - 1.0)
+        env = np.ones_like(t)
+        if self.fade_s > 0:
+            up = t < self.fade_s
+            env[up] = 0.5 - 0.5 * np.cos(np.pi * t[up] / self.fade_s)
+            down = t > T - self.fade_s
+            env[down] = 0.5 - 0.5 * np.cos(np.pi * (T - t[down]) / self.fade_s)
+        return self.offset + self.amplitude * env * np.sin(phase)
+
+    def value(self, k: int) -> float:
+        if not 0 <= k < self.n_ticks:
+            return self.offset
+        if not hasattr(self, '_arr'):
+            self._arr = self.array()
+        return float(self._arr[k])
+
+
+@dataclass
+class Step:
+    """Step of ``amplitude`` at ``t_step`` on top of ``offset``, held for ``duration``."""
+
+    amplitude: float
+    duration_s: float
+    t_step_s: float = 0.1
+    offset: float = 0.0
+    Ts: float = 1e-3
+
+    def __post_init__(self):
+        self.n_ticks = int(round(self.duration_s / self.Ts))
+
+    def value(self, k: int) -> float:
+        return self.offset + (self.amplitude if k * self.Ts >= self.t_step_s else 0.0)
+
+    def array(self) -> np.ndarray:
+        return np.array([self.value(k) for k in range(self.n_ticks)])
+
+
+def check_sweep(start_hz, increment_hz, max_hz, periods, relax_s, amplitude, offset, stroke, Ts,
+                margin=0.005, settle_periods=2):
+    """Refuse sweeps that cannot be measured or would hit the end stops: one-line UsageError."""
+    nyq = 0.5 / Ts
+    if not all(math.isfinite(v) for v in (start_hz, increment_hz, max_hz, relax_s, amplitude, offset)):
+        raise UsageError('sweep parameters must be finite numbers')
+    if start_hz <= 0 or max_hz < start_hz:
+        raise UsageError(f'frequencies: start {start_hz} Hz, max {max_hz} Hz: expected '
+                         f'0 < start <= max')
+    if increment_hz <= 0:
+        raise UsageError(f'increment {increment_hz} Hz: expected > 0')
+    if max_hz > nyq / 10:
+        raise UsageError(f'max frequency {max_hz} Hz is above Nyquist/10 = {nyq / 10:g} Hz at '
+                         f'Ts = {Ts:g} s: expected at most {nyq / 10:g} Hz')
+    if periods <= settle_periods:
+        raise UsageError(f'periods {periods}: expected more than the {settle_periods} settling '
+                         f'periods (and not negative)')
+    if relax_s < 0:
+        raise UsageError(f'relax time {relax_s} s: expected >= 0')
+    if amplitude <= 0:
+        raise UsageError(f'amplitude {amplitude} m: expected > 0')
+    reach = abs(offset) + amplitude
+    limit = stroke / 2 - margin
+    if reach > limit:
+        raise UsageError(f'amplitude {amplitude * 1e3:g} mm + offset {offset * 1e3:g} mm reaches '
+                         f'{reach * 1e3:g} mm: beyond the stroke limit of +-{limit * 1e3:g} mm '
+                         f'(stroke {stroke * 1e3:g} mm minus {margin * 1e3:g} mm margin)')

@@ -1,0 +1,112 @@
+"""rclpy plumbing shared by every node: parameters through the one loader, QoS, spinning.
+
+A node module defines a ``Schema`` and a ``make_node(params: dict) -> rclpy.node.Node``
+factory; :func:`run` does the rest. Parameter files are validated before ``rclpy.init``
+(so a malformed file gives one line, not an rcl traceback), then declared as read-only
+ROS parameters and validated again from what rclpy holds (``-p`` overrides included).
+"""
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from typing import Callable
+
+from ..core.cli import guarded
+from ..core.params import ParamError, Schema, ROS_BUILTINS, load, parse_ros_args
+
+# Sensor-data style QoS for the 1 kHz streams: keep the newest, never block the sender.
+STREAM_DEPTH = 10
+
+
+def stream_qos():
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
+    return QoSProfile(depth=STREAM_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                      history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+
+
+def latched_qos():
+    """For low-rate state that late joiners need (channel select, redundancy status)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
+    return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      history=HistoryPolicy.KEEP_LAST,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def declare_and_validate(node, schema: Schema, params: dict) -> dict:
+    """Declare every schema parameter on the node (read-only) and re-validate rclpy's values."""
+    from rcl_interfaces.msg import ParameterDescriptor
+    from rclpy.parameter import Parameter
+    overrides = dict(getattr(node, '_parameter_overrides', {}) or {})
+    values = {}
+    for spec in schema.params:
+        desc = ParameterDescriptor(description=f'{spec.doc} [{spec.expected()}]'.strip(),
+                                   read_only=True, dynamic_typing=True)
+        param = node.declare_parameter(spec.name, params[spec.name], desc)
+        value = param.value
+        values[spec.name] = value if param.type_ != Parameter.Type.NOT_SET else params[spec.name]
+    unknown = [k for k in overrides if k not in schema.by_name and k not in ROS_BUILTINS]
+    if unknown:
+        key = unknown[0]
+        raise ParamError(f'parameters: unknown parameter {key!r} = '
+                         f'{overrides[key].value!r} for node {schema.node!r}')
+    return schema.validate(values, context='ROS parameters')
+
+
+def run(name: str, schema: Schema, make_node: Callable, argv=None) -> int:
+    """Entry point body of a node executable: validate parameters, spin, shut down cleanly."""
+    argv = list(sys.argv if argv is None else argv)
+
+    def main() -> int:
+        files, overrides, node_name, namespace = parse_ros_args(argv[1:])
+        params = load(schema, files, overrides, node=node_name or name, namespace=namespace)
+        import rclpy
+        from rclpy.signals import SignalHandlerOptions
+        # We own SIGINT/SIGTERM: stop the node's own threads first, then shut rclpy down,
+        # so nothing publishes on an invalid context during shutdown.
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+        stop = threading.Event()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
+        node = None
+        try:
+            node = make_node(params)
+            executor = make_executor()
+            executor.add_node(node)
+            while not stop.is_set() and rclpy.ok():
+                executor.spin_once(timeout_sec=0.1)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            if node is not None:
+                close = getattr(node, 'close', None)
+                if close:
+                    close()
+                node.destroy_node()
+            rclpy.try_shutdown()
+        return 0
+
+    return guarded(name, main)
+
+
+def make_executor():
+    """EventsExecutor: about a third of the default executor's CPU at 1 kHz (ROS2_WHEELS.md)."""
+    try:
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    except ImportError:  # pragma: no cover - older rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor()
+
+
+def node_kwargs() -> dict:
+    """Keyword arguments for rclpy Node so params-file keys show up as overrides."""
+    return dict(automatically_declare_parameters_from_overrides=False,
+                allow_undeclared_parameters=False)
+
+
+def not_implemented(name: str, issue: int) -> int:
+    """Executables whose node is not built yet say so plainly."""
+    print(f'{name}: error: this node is not implemented yet (tracked in issue {issue})',
+          file=sys.stderr)
+    return 3

@@ -1,0 +1,28 @@
+"""/diagnostics publishing shared by the nodes."""
+from __future__ import annotations
+
+
+def publisher(node):
+    from diagnostic_msgs.msg import DiagnosticArray
+    return node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+
+
+def publish(node, pub, name: str, values: dict, level: int = 0, message: str = 'ok'):
+    """One DiagnosticStatus named '<node>: <name>' with values as key/value strings."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    arr = DiagnosticArray()
+    arr.header.stamp = node.get_clock().now().to_msg()
+    status = DiagnosticStatus(level=bytes([level]), name=f'{node.get_name()}: {name}',
+                              message=message, hardware_id='eha')
+    status.values = [KeyValue(key=str(k), value=_fmt(v)) for k, v in values.items()]
+    arr.status = [status]
+    pub.publish(arr)
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f'{v:.6g}'
+    return str(v)
+
+
+OK, WARN, ERROR = 0, 1, 2

@@ -1,0 +1,106 @@
+"""Helpers for tests that talk DDS: deterministic sample messages, subprocess nodes, waiting."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import zlib
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+VENV_BIN = os.path.join(ROOT, '.venv', 'bin')
+
+MSG_TYPES = ['ActuatorState', 'PlantTruth', 'PositionEstimate', 'PositionReference',
+             'ActuatorCommand', 'RedundancyStatus', 'ExternalLoad', 'ChannelSelect']
+
+
+def _value(field: str, ftype: str, salt: int):
+    """A distinctive value for a field, the same in every process."""
+    h = zlib.crc32(f'{field}:{salt}'.encode())
+    if ftype.startswith('sequence') or '[' in ftype:
+        base = ftype.split('[')[0].replace('sequence<', '').rstrip('>')
+        n = int(ftype.split('[')[1].rstrip(']')) if '[' in ftype else 2
+        return [_value(f'{field}{i}', base, salt) for i in range(n)]
+    if ftype == 'boolean':
+        return bool(h & 1)
+    if ftype in ('double', 'float'):
+        return (h % 100000) / 7.0 - 5000.0
+    if ftype.startswith('uint'):
+        return h % (2 if field in ('channel', 'active_channel') else 250)
+    if ftype.startswith('int'):
+        return h % 120 - 60
+    if ftype == 'string':
+        return f'{field}-{h:x}'
+    raise TypeError(ftype)
+
+
+def fill(msg, salt: int = 1):
+    """Fill every field of a ROS message (recursively into std_msgs/Header)."""
+    for field, ftype in msg.get_fields_and_field_types().items():
+        if ftype == 'std_msgs/Header':
+            msg.header.frame_id = f'frame-{salt}'
+            msg.header.stamp.sec = 1000 + salt
+            msg.header.stamp.nanosec = 123456 + salt
+            continue
+        setattr(msg, field, _value(field, ftype, salt))
+    return msg
+
+
+def start_process(args, env=None, **kw) -> subprocess.Popen:
+    """Start a node/peer as a separate process in its own process group."""
+    full_env = dict(os.environ)
+    full_env.update(env or {})
+    return subprocess.Popen(args, env=full_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True, **kw)
+
+
+def stop_process(proc: subprocess.Popen, timeout: float = 10.0):
+    """SIGINT, then SIGKILL; returns (returncode, stdout, stderr)."""
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, signal.SIGINT)
+        except ProcessLookupError:
+            pass
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+    return proc.returncode, out, err
+
+
+def python_module(module: str, *args) -> list:
+    return [sys.executable, '-m', module, *args]
+
+
+class Spinner:
+    """Spin an rclpy node in a background thread for the duration of a test."""
+
+    def __init__(self, node):
+        from rclpy.executors import SingleThreadedExecutor
+        self.node = node
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(node)
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while not self._stop.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self):
+        self._stop.set()
+        self.thread.join(timeout=5)
+        self.executor.remove_node(self.node)
+
+
+def wait_for(pred, timeout: float, period: float = 0.02) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(period)
+    return pred()

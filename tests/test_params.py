@@ -1,0 +1,148 @@
+"""Parameter loader: ROS params-file format, schema checks, one-line errors with non-zero exit."""
+import os
+import subprocess
+import sys
+
+import pytest
+
+from eha_ros.core.params import Param, ParamError, Schema, load, parse_ros_args, read_params_file
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCHEMA = Schema('demo', [
+    Param('gain.kp', 'float', 'rad/s/m', 1.0, 0.0, 100.0),
+    Param('gain.ki', 'float', 'rad/s^2/m', min=0.0, max=1e4),          # required
+    Param('mode', 'str', '', 'pva', choices=('pva', 'model')),
+    Param('num', 'float[]', '', [1.0, 2.0]),
+    Param('count', 'int', '', 3, 1, 10),
+    Param('enabled', 'bool', '', True),
+])
+
+
+def write(tmp_path, text, name='p.yaml'):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+def test_wildcard_then_node_section_nested_keys(tmp_path):
+    f = write(tmp_path, '/**:\n  ros__parameters:\n    gain: {kp: 2, ki: 3.5}\n'
+                        'demo:\n  ros__parameters:\n    gain: {kp: 7.0}\n    num: [1, 2.5]\n'
+                        'other:\n  ros__parameters:\n    nothing: 1\n')
+    values = load(SCHEMA, [f])
+    assert values['gain.kp'] == 7.0 and isinstance(values['gain.kp'], float)
+    assert values['gain.ki'] == 3.5
+    assert values['num'] == [1.0, 2.5]
+    assert values['mode'] == 'pva' and values['count'] == 3     # defaults filled
+
+
+def test_later_file_and_overrides_win(tmp_path):
+    a = write(tmp_path, 'demo:\n  ros__parameters:\n    gain: {ki: 1.0, kp: 1.0}\n', 'a.yaml')
+    b = write(tmp_path, 'demo:\n  ros__parameters:\n    gain: {ki: 2.0}\n', 'b.yaml')
+    values = load(SCHEMA, [a, b], {'gain.kp': 9})
+    assert (values['gain.ki'], values['gain.kp']) == (2.0, 9.0)
+
+
+def test_remapped_node_name_and_namespace(tmp_path):
+    f = write(tmp_path, '/eha/demo2:\n  ros__parameters:\n    gain: {ki: 4.0}\n')
+    assert read_params_file(f, 'demo2', '/eha') == {'gain.ki': 4.0}
+    assert read_params_file(f, 'demo', '/eha') == {}
+
+
+def test_parse_ros_args():
+    files, over, name, ns = parse_ros_args(
+        ['--ros-args', '--params-file', 'a.yaml', '-p', 'gain.kp:=2.5', '-r', '__node:=x',
+         '-r', '__ns:=/eha', '--params-file', 'b.yaml', '-p', 'mode:=model'])
+    assert files == ['a.yaml', 'b.yaml']
+    assert over == {'gain.kp': 2.5, 'mode': 'model'}
+    assert (name, ns) == ('x', '/eha')
+
+
+@pytest.mark.parametrize('text, words', [
+    ('demo:\n  ros__parameters:\n    gain: {ki: 1.0, kd: 2.0}\n', ['unknown', "'gain.kd'", '2.0']),
+    ('demo:\n  ros__parameters:\n    gain: {kp: 1.0}\n', ['missing', "'gain.ki'", 'float in [0, 10000]']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: fast}\n', ['gain.ki', "'fast'", 'expected float']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: -1.0}\n', ['gain.ki', '-1.0', 'in [0, 10000]']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: 1.0}\n    mode: kalman\n', ['mode', "'kalman'", 'pva|model']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: 1.0}\n    count: 2.5\n', ['count', '2.5', 'int']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: 1.0}\n    enabled: 1\n', ['enabled', '1', 'bool']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: .nan}\n', ['gain.ki', 'nan', 'float']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: [1.0}\n', ['malformed YAML', 'line 3']),
+    ('demo:\n  gain: 1\n', ['section', 'ros__parameters']),
+    ('- 1\n- 2\n', ['top level is list']),
+])
+def test_each_error_is_one_line_naming_file_key_value_expected(tmp_path, text, words):
+    f = write(tmp_path, text)
+    with pytest.raises(ParamError) as info:
+        load(SCHEMA, [f])
+    message = str(info.value)
+    assert '\n' not in message
+    assert f in message
+    for word in words:
+        assert word in message, message
+
+
+def test_unreadable_file(tmp_path):
+    with pytest.raises(ParamError, match=r'nope\.yaml: cannot read parameter file: no such file'):
+        load(SCHEMA, [str(tmp_path / 'nope.yaml')])
+
+
+# ---- the same through a real program: one line on stderr, exit code 2, no traceback ----
+
+CHECK = [sys.executable, '-m', 'eha_ros.tools.check_config', '--node', 'plant_sim']
+GOOD = os.path.join(ROOT, 'config', 'plant.yaml')
+
+
+def run_check(*files):
+    return subprocess.run(CHECK + list(files), capture_output=True, text=True, timeout=120)
+
+
+def plant_yaml_with(old, new):
+    text = open(GOOD).read()
+    assert old in text, old
+    return text.replace(old, new, 1)
+
+
+def test_shipped_plant_config_is_valid():
+    res = run_check(GOOD)
+    assert res.returncode == 0, res.stderr
+    assert 'ok:' in res.stdout
+
+
+BAD_CASES = {
+    'unknown key': (lambda: plant_yaml_with('plant:\n', 'plant:\n      pump_typo: 3.0\n'),
+                    ['unknown parameter', "'plant.pump_typo'", '3.0']),
+    'missing required key': (lambda: '\n'.join(l for l in open(GOOD).read().splitlines()
+                                               if not l.strip().startswith('A_p:')),
+                             ['missing required parameter', "'plant.cylinder.A_p'", 'm^2']),
+    'wrong type': (lambda: _replace_value('D_p', '"big"'), ['plant.pump.D_p', "'big'", 'expected float']),
+    'out of range': (lambda: _replace_value('D_p', '-6.684e-7'),
+                     ['plant.pump.D_p', '-6.684e-07', 'expected float in [']),
+    'malformed YAML': (lambda: open(GOOD).read() + '\n  : [unclosed\n', ['malformed YAML', 'line']),
+}
+
+
+def _replace_value(key, value):
+    lines = open(GOOD).read().splitlines()
+    for i, line in enumerate(lines):
+        if line.strip().startswith(key + ':'):
+            indent = line[:len(line) - len(line.lstrip())]
+            lines[i] = f'{indent}{key}: {value}'
+            return '\n'.join(lines) + '\n'
+    raise AssertionError(key)
+
+
+@pytest.mark.parametrize('case', sorted(BAD_CASES) + ['unreadable file'])
+def test_bad_parameter_file_stops_program_with_one_line(tmp_path, case):
+    if case == 'unreadable file':
+        path, words = str(tmp_path / 'missing.yaml'), ['cannot read parameter file']
+    else:
+        make, words = BAD_CASES[case]
+        path = write(tmp_path, make(), 'bad.yaml')
+    res = run_check(path)
+    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert 'Traceback' not in res.stderr
+    assert lines[0].startswith('check_config: error: ' + path), lines[0]
+    for word in words:
+        assert word in lines[0], lines[0]

@@ -1,0 +1,251 @@
+"""plant_sim as a separate process over DDS: 1 kHz stream, commands applied, faults visible,
+bad inputs rejected and reported, lock-step, bad parameters."""
+import math
+import os
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+from ros_util import ROOT, VENV_BIN, start_process, stop_process, wait_for
+
+pytestmark = pytest.mark.ros
+CONFIG = [os.path.join(ROOT, 'config', 'plant.yaml'), os.path.join(ROOT, 'config', 'plant_sim.yaml')]
+D_P, A_P = 6.684e-7, 2.572e-3
+
+
+def plant_cmd(*extra):
+    args = [os.path.join(VENV_BIN, 'plant_sim'), '--ros-args']
+    for f in CONFIG:
+        args += ['--params-file', f]
+    return args + list(extra)
+
+
+class Probe:
+    """Test-side subscriptions to the plant's outputs and publishers of its inputs."""
+
+    def __init__(self, node):
+        from eha_msgs.msg import (ActuatorCommand, ActuatorState, ExternalLoad, PlantTruth)
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.qos import QoSProfile
+        qos = QoSProfile(depth=1000)
+        self.node = node
+        self.states, self.truths, self.diags = [], [], []
+        self.arrivals = []
+        node.create_subscription(ActuatorState, '/eha/state', self._on_state, qos)
+        node.create_subscription(PlantTruth, '/eha/sim/truth', self.truths.append, qos)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
+        self.cmd_pub = node.create_publisher(ActuatorCommand, '/eha/command', 10)
+        self.load_pub = node.create_publisher(ExternalLoad, '/eha/sim/load_force', 10)
+        self.Cmd, self.Load = ActuatorCommand, ExternalLoad
+
+    def _on_state(self, msg):
+        self.states.append(msg)
+        self.arrivals.append(time.monotonic())
+
+    def _on_diag(self, msg):
+        for st in msg.status:
+            if st.name.startswith('plant_sim'):
+                self.diags.append({kv.key: kv.value for kv in st.values})
+
+    def command(self, speed, seq=None):
+        seq = self.states[-1].seq if seq is None and self.states else (seq or 0)
+        self.cmd_pub.publish(self.Cmd(seq=int(seq), motor_speed_ref=float(speed)))
+
+    @property
+    def seq(self):
+        return self.states[-1].seq if self.states else 0
+
+    def wait_ticks(self, n, timeout=20.0):
+        """Wait until the plant has published n more ticks (plant time, not wall time)."""
+        target = self.seq + n
+        assert wait_for(lambda: self.seq >= target, timeout), f'plant stalled before {target}'
+
+    def hold(self, speed, seconds):
+        """Command a speed every ~2 ms (as a controller would) for ``seconds`` of plant time."""
+        target = self.seq + int(seconds * 1000)
+        end = time.monotonic() + 20 + 3 * seconds
+        while self.seq < target and time.monotonic() < end:
+            self.command(speed)
+            time.sleep(0.002)
+
+    def fault(self, name, channel=0, magnitude=0.0, duration=0.0):
+        from eha_msgs.srv import InjectFault
+        client = self.node.create_client(InjectFault, '/eha/inject_fault')
+        assert client.wait_for_service(timeout_sec=20)
+        fut = client.call_async(InjectFault.Request(fault=name, channel=channel,
+                                                    magnitude=float(magnitude),
+                                                    duration=float(duration)))
+        assert wait_for(fut.done, 10)
+        return fut.result()
+
+    def window(self, k0, k1, timeout=20.0):
+        """States with k0 <= seq < k1 (plant ticks), waiting until they have arrived."""
+        assert wait_for(lambda: self.seq >= k1, timeout), f'plant stalled before {k1}'
+        return [s for s in self.states[-(self.seq - k0) - 100:] if k0 <= s.seq < k1]
+
+    def recent(self, seconds):
+        """States of the last ``seconds`` of plant time."""
+        cut = self.seq - int(seconds * 1000)
+        return [s for s in self.states[-int(seconds * 1000) - 50:] if s.seq > cut]
+
+
+@pytest.fixture(scope='module')
+def plant_proc():
+    proc = start_process(plant_cmd())
+    yield proc
+    code, out, err = stop_process(proc)
+    assert 'Traceback' not in err, err
+
+
+@pytest.fixture
+def probe(plant_proc, ros_node):
+    p = Probe(ros_node)
+    assert wait_for(lambda: len(p.states) > 50, 60), 'no /eha/state from plant_sim'
+    return p
+
+
+def test_state_stream_at_1khz(probe):
+    """The plant publishes at 1 kHz (its own stamps) and a subscriber loses no state."""
+    probe.states.clear(); probe.arrivals.clear()
+    probe.wait_ticks(3000)
+    st = probe.states
+    seqs = np.array([s.seq for s in st])
+    stamps = np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in st])
+    rate = (seqs[-1] - seqs[0]) / (stamps[-1] - stamps[0])
+    received = len(seqs) / (seqs[-1] - seqs[0] + 1)
+    period = np.diff(stamps)
+    print(f'publish rate {rate:.1f} Hz, received {100 * received:.2f} %, stamp period p99 '
+          f'{1e3 * np.percentile(period, 99):.2f} ms over {len(seqs)} states')
+    assert 980 <= rate <= 1020
+    assert np.all(np.diff(seqs) >= 1)
+    assert received >= 0.99
+    assert len(probe.truths) > 0 and all(t.seq > 0 for t in probe.truths[-10:])
+
+
+def test_command_applied_gives_piston_speed_d_over_a(probe):
+    probe.hold(100.0, 0.6)        # 100 rad/s -> 100 * D_p/A_p = 26 mm/s
+    probe.truths.clear()
+    probe.hold(100.0, 0.3)
+    probe.hold(0.0, 0.4)
+    vel = np.array([t.velocity for t in probe.truths[50:250]])
+    assert vel.size > 100
+    assert math.isclose(np.median(vel), 100.0 * D_P / A_P, rel_tol=0.05), np.median(vel)
+
+
+def test_nan_command_rejected_last_good_held_and_reported(probe):
+    probe.hold(50.0, 0.5)
+    for _ in range(5):
+        probe.command(float('nan'))
+    n0 = len(probe.truths)
+    probe.wait_ticks(30)                # within command_timeout: last good command held
+    vel = np.array([t.velocity for t in probe.truths[n0:]])
+    assert np.all(np.isfinite(vel)) and np.median(vel) > 0.5 * 50 * D_P / A_P
+    probe.hold(0.0, 0.3)
+    assert wait_for(lambda: probe.diags and int(probe.diags[-1].get('rejected_commands', 0)) >= 5, 5)
+
+
+def test_stale_commands_stop_the_motor(probe):
+    probe.hold(80.0, 0.3)
+    probe.wait_ticks(500)               # no commands: beyond command_timeout
+    speeds = [s.motor_speed[0] for s in probe.recent(0.1)]
+    assert abs(np.median(speeds)) < 5.0
+    assert wait_for(lambda: probe.diags and int(probe.diags[-1].get('command_timeouts', 0)) >= 1, 5)
+
+
+def fault_tick(res) -> int:
+    """The plant tick a fault took effect at, from the service reply."""
+    assert res.success, res.message
+    return int(res.message.rsplit('(tick ', 1)[1].rstrip(')'))
+
+
+def test_each_fault_visible_in_state(probe):
+    probe.hold(0.0, 0.3)
+    pos0 = np.median([s.position for s in probe.recent(0.2)])
+    # msp_bias: measured position jumps by the bias, then returns when the duration expires
+    k = fault_tick(probe.fault('msp_bias', magnitude=1e-3, duration=0.5))
+    biased = np.median([s.position for s in probe.window(k + 100, k + 300)])
+    assert abs(biased - pos0 - 1e-3) < 2e-4
+    after = np.median([s.position for s in probe.window(k + 600, k + 700)])
+    assert abs(after - pos0) < 2e-4
+    # msp_stuck: measured position frozen while the piston moves
+    k = fault_tick(probe.fault('msp_stuck', duration=0.4))
+    probe.hold(150.0, 0.3)
+    stuck = [s.position for s in probe.window(k + 50, k + 250)]
+    assert np.ptp(stuck) < 1e-9
+    probe.hold(-150.0, 0.3)
+    probe.hold(0.0, 0.3)
+    # msp_noise: the measured position's scatter grows
+    quiet = np.std([s.position for s in probe.recent(0.1)])
+    k = fault_tick(probe.fault('msp_noise', magnitude=5e-4, duration=0.5))
+    noisy = np.std([s.position for s in probe.window(k + 50, k + 250)])
+    assert noisy > 5 * quiet, (noisy, quiet)
+    # pressure_sensor: both chamber pressures shifted by the bias
+    probe.wait_ticks(400)
+    pa0 = np.median([s.pressure_a for s in probe.recent(0.1)])
+    k = fault_tick(probe.fault('pressure_sensor', magnitude=20e5, duration=0.4))
+    pa1 = np.median([s.pressure_a for s in probe.window(k + 50, k + 150)])
+    assert abs(pa1 - pa0 - 20e5) < 3e5
+    probe.wait_ticks(400)
+    # pump_leakage under load: the commanded speed moves the piston much less
+    probe.load_pub.publish(probe.Load(force=10e3))
+    probe.hold(100.0, 0.3)
+    x = [s.position for s in probe.recent(0.2)]
+    healthy_rate = (x[-1] - x[0]) / 0.2
+    fault_tick(probe.fault('pump_leakage', channel=0, magnitude=30.0, duration=1.0))
+    probe.hold(100.0, 0.3)
+    x = [s.position for s in probe.recent(0.2)]
+    leaky_rate = (x[-1] - x[0]) / 0.2
+    assert leaky_rate < 0.7 * healthy_rate, (healthy_rate, leaky_rate)
+    probe.load_pub.publish(probe.Load(force=0.0))
+    probe.hold(0.0, 0.8)
+    # motor_fail: drive 0 reports a fault and its current is zero
+    k = fault_tick(probe.fault('motor_fail', channel=0, duration=0.5))
+    s = probe.window(k + 50, k + 100)[-1]
+    assert s.drive_fault[0] and abs(s.motor_current[0]) < 0.5
+    assert not probe.window(k + 600, k + 650)[-1].drive_fault[0]
+    # unknown fault: refused with a reason
+    res = probe.fault('flux_capacitor')
+    assert not res.success and 'flux_capacitor' in res.message
+
+
+def test_lockstep_steps_only_on_command(ros_node):
+    from rosgraph_msgs.msg import Clock
+    proc = start_process(plant_cmd('-p', 'sim_node.lockstep:=true', '-r', '__ns:=/ls'))
+    try:
+        from eha_msgs.msg import ActuatorCommand, ActuatorState
+        states, clocks = [], []
+        ros_node.create_subscription(ActuatorState, '/ls/eha/state', states.append, 100)
+        ros_node.create_subscription(Clock, '/clock', clocks.append, 100)
+        pub = ros_node.create_publisher(ActuatorCommand, '/ls/eha/command', 10)
+        assert wait_for(lambda: len(states) >= 1, 60)
+        for k in range(20):
+            seq = states[-1].seq
+            pub.publish(ActuatorCommand(seq=seq, motor_speed_ref=10.0))
+            assert wait_for(lambda: states[-1].seq == seq + 1, 5), f'no state after command {seq}'
+        last = states[-1].seq
+        time.sleep(0.3)                 # no command: no step
+        assert states[-1].seq == last
+        assert clocks and clocks[-1].clock.nanosec == (last * 1_000_000) % 1_000_000_000
+    finally:
+        stop_process(proc)
+
+
+def test_bad_params_file_stops_node_with_one_line(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('plant_sim:\n  ros__parameters:\n    sim_node:\n      seed: -4\n')
+    res = subprocess.run(plant_cmd('--params-file', str(bad)), capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'Traceback' not in res.stderr, res.stderr
+    assert lines[0].startswith(f'plant_sim: error: {bad}: sim_node.seed = -4: expected int in [0,')
+
+
+def test_bad_override_stops_node_with_one_line():
+    res = subprocess.run(plant_cmd('-p', 'plant.pump.D_p:=-1.0'), capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 2
+    assert res.stderr.strip() .startswith('plant_sim: error: command line: plant.pump.D_p = -1.0')
+    assert len(res.stderr.strip().splitlines()) == 1
