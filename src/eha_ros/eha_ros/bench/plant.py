@@ -1,4 +1,5 @@
-"""Benchmark of the nonlinear EHA plant alone in batch (no ROS): simulated s per wall s.
+"""Plant benchmarks: the model alone in batch (simulated s per wall s) and the plant_sim node in
+real time over DDS (achieved publish rate, period p99, CPU share).
 
 ``run(args)`` returns flat keys in SI units. args may be None or carry ``duration`` (s of
 simulated time per repeat, default 5), ``repeats`` (default 5) and ``substeps`` (default 16).
@@ -8,7 +9,6 @@ reversals), then the same with the Table 3.8 PID closed on the measured position
 from __future__ import annotations
 
 import math
-import os
 import time
 
 
@@ -65,7 +65,7 @@ def run(args=None) -> dict:
         plant.step(u, load_f[k])
     closed_wall = time.perf_counter() - t0
 
-    return {
+    result = {
         'plant_substeps': substeps,
         'plant_substep_s': plant.Ts / substeps,
         'plant_simulated_s': duration,
@@ -76,7 +76,80 @@ def run(args=None) -> dict:
         'plant_newton_iterations_per_substep': newton,
         'plant_closed_loop_sim_s_per_wall_s': duration / closed_wall,
         'plant_closed_loop_us_per_tick': closed_wall / n * 1e6,
-        'cpu_count': os.cpu_count(),
+    }
+    if not _get(args, 'batch_only', False):
+        result.update(node_realtime(float(_get(args, 'duration', 10.0))))
+    return result
+
+
+def node_realtime(duration: float = 10.0) -> dict:
+    """plant_sim as its own process at 1 kHz, answered by a controller-like echo of commands.
+
+    Measured at the subscriber: received rate, gaps in seq, period of the plant's stamps
+    (p50/p99/max); the node's CPU share from /proc; its own loop statistics from /diagnostics.
+    """
+    import numpy as np
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from eha_msgs.msg import ActuatorCommand, ActuatorState
+    from . import _nodes
+
+    proc = _nodes.start(_nodes.node_command('plant_sim', ['plant.yaml', 'plant_sim.yaml']))
+    rclpy.init()
+    node = rclpy.create_node('bench_plant')
+    stamps, seqs, diags = [], [], []
+    cmd_pub = node.create_publisher(ActuatorCommand, 'eha/command', 10)
+    cmd = ActuatorCommand()
+
+    def on_state(msg):
+        stamps.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+        seqs.append(msg.seq)
+        cmd.seq = msg.seq
+        cmd.motor_speed_ref = 0.0
+        cmd_pub.publish(cmd)
+
+    def on_diag(msg):
+        for st in msg.status:
+            if st.name.startswith('plant_sim'):
+                diags.append({kv.key: kv.value for kv in st.values})
+
+    node.create_subscription(ActuatorState, 'eha/state', on_state, 100)
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
+    try:
+        t_end = time.monotonic() + 60
+        while len(seqs) < 500 and time.monotonic() < t_end:      # start-up, discovery
+            rclpy.spin_once(node, timeout_sec=0.05)
+        if not seqs:
+            raise RuntimeError('plant_sim published no state within 60 s: '
+                               + _nodes.stop(proc)[-300:])
+        stamps.clear(); seqs.clear()
+        cpu0, wall0 = _nodes.cpu_seconds(proc.pid), time.monotonic()
+        while time.monotonic() - wall0 < duration:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        cpu1, wall1 = _nodes.cpu_seconds(proc.pid), time.monotonic()
+        t_diag = time.monotonic() + 3
+        n_diag = len(diags)
+        while len(diags) == n_diag and time.monotonic() < t_diag:
+            rclpy.spin_once(node, timeout_sec=0.05)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+        _nodes.stop(proc)
+    st, sq = np.array(stamps), np.array(seqs)
+    period = np.diff(st)
+    d = diags[-1] if diags else {}
+    return {
+        'node_duration_s': wall1 - wall0,
+        'node_publish_rate_hz': float((sq[-1] - sq[0]) / (st[-1] - st[0])),
+        'node_received_fraction': float(len(sq) / (sq[-1] - sq[0] + 1)),
+        'node_stamp_period_p50_s': float(np.percentile(period, 50)),
+        'node_stamp_period_p99_s': float(np.percentile(period, 99)),
+        'node_stamp_period_max_s': float(period.max()),
+        'node_cpu_share_of_one_core': (cpu1 - cpu0) / (wall1 - wall0),
+        'node_loop_exec_mean_s': float(d.get('exec_mean_s', 'nan')),
+        'node_loop_exec_p99_s': float(d.get('exec_p99_s', 'nan')),
+        'node_loop_overruns': int(d.get('overruns', 0)),
+        'node_loop_skipped_deadlines': int(d.get('skipped_deadlines', 0)),
     }
 
 
