@@ -85,6 +85,15 @@ class Probe:
         assert wait_for(lambda: self.seq >= k1, timeout), f'plant stalled before {k1}'
         return [s for s in self.states[-(self.seq - k0) - 100:] if k0 <= s.seq < k1]
 
+    def sensor_error(self, k0, k1):
+        """Measured minus true position for ticks k0 <= seq < k1 (matched by seq)."""
+        states = self.window(k0, k1)
+        assert wait_for(lambda: self.truths and self.truths[-1].seq >= k1 - 1, 10)
+        truth = {t.seq: t.position for t in self.truths[-(self.truths[-1].seq - k0) - 100:]}
+        err = np.array([s.position - truth[s.seq] for s in states if s.seq in truth])
+        assert err.size > 0.8 * (k1 - k0), 'states and truth do not match up'
+        return err
+
     def recent(self, seconds):
         """States of the last ``seconds`` of plant time."""
         cut = self.seq - int(seconds * 1000)
@@ -162,25 +171,24 @@ def fault_tick(res) -> int:
 
 def test_each_fault_visible_in_state(probe):
     probe.hold(0.0, 0.3)
-    pos0 = np.median([s.position for s in probe.recent(0.2)])
-    # msp_bias: measured position jumps by the bias, then returns when the duration expires
+    # msp_bias: the sensor error jumps by the bias, then returns when the duration expires
     k = fault_tick(probe.fault('msp_bias', magnitude=1e-3, duration=0.5))
-    biased = np.median([s.position for s in probe.window(k + 100, k + 300)])
-    assert abs(biased - pos0 - 1e-3) < 2e-4
-    after = np.median([s.position for s in probe.window(k + 600, k + 700)])
-    assert abs(after - pos0) < 2e-4
+    before = np.median(probe.sensor_error(k - 200, k))
+    assert abs(np.median(probe.sensor_error(k + 100, k + 300)) - before - 1e-3) < 1e-4
+    assert abs(np.median(probe.sensor_error(k + 600, k + 700)) - before) < 1e-4
     # msp_stuck: measured position frozen while the piston moves
     k = fault_tick(probe.fault('msp_stuck', duration=0.4))
     probe.hold(150.0, 0.3)
     stuck = [s.position for s in probe.window(k + 50, k + 250)]
-    assert np.ptp(stuck) < 1e-9
+    moved = [t.position for t in probe.truths if k + 50 <= t.seq < k + 250]
+    assert np.ptp(stuck) < 1e-9 and np.ptp(moved) > 1e-3
     probe.hold(-150.0, 0.3)
     probe.hold(0.0, 0.3)
-    # msp_noise: the measured position's scatter grows
-    quiet = np.std([s.position for s in probe.recent(0.1)])
+    # msp_noise: the sensor error's scatter grows by the injected sigma
     k = fault_tick(probe.fault('msp_noise', magnitude=5e-4, duration=0.5))
-    noisy = np.std([s.position for s in probe.window(k + 50, k + 250)])
-    assert noisy > 5 * quiet, (noisy, quiet)
+    quiet = np.std(probe.sensor_error(k - 200, k))
+    noisy = np.std(probe.sensor_error(k + 50, k + 450))
+    assert quiet < 1e-4 and 3e-4 < noisy < 8e-4, (quiet, noisy)
     # pressure_sensor: both chamber pressures shifted by the bias
     probe.wait_ticks(400)
     pa0 = np.median([s.pressure_a for s in probe.recent(0.1)])
