@@ -1,0 +1,128 @@
+"""Uncertain plant family of Table 4.5 (log-spaced grid, 270 plants) and the cascade plants.
+
+P_iw = omega/i_ref and P_i = x/i_ref from eq. 3.35 (torque-mode plant, linear.torque_abcd);
+P_omega = x/omega_ref and P_d = x/F_L of each plant's OWN closed velocity loop (eq. 3.42 with
+the designed G_v), built in state space so uncertainty propagates through the cascade.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..plant import linear
+from ..plant.parameters import PlantParams
+from .freqresp import feedback, pad, ss_freqresp
+from .lti import Zpk
+
+NAMES = ('C_eq', 'D_p', 'beta', 'k_T', 'k_E')
+I_W, I_X, I_V = 1, 2, 3          # state indices of omega, x, xdot in eq. 3.35
+
+
+def scaled_params(base: dict, scale) -> dict:
+    """Plant parameter dict with Table 4.5 multipliers [C_eq, D_p, beta, k_T, k_E] applied
+    (C_eq scales C_p, C_c and C_r together)."""
+    c, d, b, kt, ke = (float(v) for v in scale)
+    out = dict(base)
+    for key in ('plant.pump.C_p', 'plant.cylinder.C_c', 'plant.pump.C_r'):
+        out[key] = base[key] * c
+    out['plant.pump.D_p'] = base['plant.pump.D_p'] * d
+    out['plant.fluid.beta'] = base['plant.fluid.beta'] * b
+    out['plant.motor.k_T'] = base['plant.motor.k_T'] * kt
+    out['plant.motor.k_E'] = base['plant.motor.k_E'] * ke
+    return out
+
+
+def grid_scales(spec) -> np.ndarray:
+    """(N, 5) multipliers: log-spaced grids of Table 4.5 (sizes from the spec), C_eq slowest."""
+    axes = []
+    for name in NAMES:
+        lo, hi = spec[f'family.{name}_range']
+        n = spec[f'family.{name}_n']
+        axes.append(np.geomspace(lo, hi, n) if n > 1 else np.array([np.sqrt(lo * hi)]))
+    return np.array(list(itertools.product(*axes)), float)
+
+
+@dataclass
+class TorqueFamily:
+    """Torque-mode plants (eq. 3.35) of the family; index 0..N-1, plus the nominal P0."""
+
+    scales: np.ndarray      # (N, 5)
+    A: np.ndarray           # (N, 6, 6)
+    B: np.ndarray           # (N, 6)     i_ref input
+    B_load: np.ndarray      # (N, 6)     F_L input (-1/m_p on xdot, eq. 3.23)
+    A0: np.ndarray
+    B0: np.ndarray
+    B0_load: np.ndarray
+    k_T_nominal: float
+    D_p_over_A_p: float
+
+    @property
+    def n(self) -> int:
+        return self.A.shape[0]
+
+    def all_A(self):
+        """Family plus nominal (nominal last) for batched evaluation."""
+        return (np.concatenate([self.A, self.A0[None]]), np.concatenate([self.B, self.B0[None]]),
+                np.concatenate([self.B_load, self.B0_load[None]]))
+
+
+def _abcd(params: dict):
+    A, B, _, _ = linear.torque_abcd(params)
+    p = PlantParams.from_dict(params)
+    bl = np.zeros(6)
+    bl[I_V] = -1.0 / p.m_p
+    return A, B[:, 0], bl
+
+
+def build_family(plant: dict, spec) -> TorqueFamily:
+    """All grid plants and the nominal plant, each from linear.torque_abcd (eq. 3.35)."""
+    scales = grid_scales(spec)
+    mats = [_abcd(scaled_params(plant, s)) for s in scales]
+    A0, B0, BL0 = _abcd(scaled_params(plant, spec['family.nominal_scale']))
+    p0 = PlantParams.from_dict(plant)
+    return TorqueFamily(scales, np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
+                        np.array([m[2] for m in mats]), A0, B0, BL0, p0.k_T, p0.D_p / p0.A_p)
+
+
+def C_row(idx: int, n: int) -> np.ndarray:
+    c = np.zeros(n)
+    c[idx] = 1.0
+    return c
+
+
+@dataclass
+class CascadePlants:
+    """Position-loop plants: closed velocity loop per family member (nominal last)."""
+
+    A: np.ndarray            # (N+1, n, n)
+    B_ref: np.ndarray        # (N+1, n)   omega_ref input
+    B_load: np.ndarray       # (N+1, n)   F_L input
+    C_x: np.ndarray          # (n,)       position output
+    C_w: np.ndarray          # (n,)       motor speed output
+
+    def P_omega(self, w):
+        """x/omega_ref (eq. 3.42 with the designed G_v), (N+1, F)."""
+        return ss_freqresp(self.A, self.B_ref, self.C_x, w)
+
+    def P_d(self, w):
+        """x/F_L of the same closed velocity loop, (N+1, F)."""
+        return ss_freqresp(self.A, self.B_load, self.C_x, w)
+
+
+def velocity_loop_plants(fam: TorqueFamily, Gv: Zpk) -> CascadePlants:
+    """Close each plant's velocity loop (speed feedback, i_ref = G_v (omega_ref - omega))."""
+    A, B, BL = fam.all_A()
+    n = A.shape[1]
+    Cw = np.broadcast_to(C_row(I_W, n), (A.shape[0], n))
+    Acl, Br, (Bl,) = feedback(A, B, Cw, Gv.ss(), extra_B=(BL,))
+    m = Acl.shape[1] - n
+    return CascadePlants(Acl, Br, Bl, pad(C_row(I_X, n), m), pad(C_row(I_W, n), m))
+
+
+def torque_responses(fam: TorqueFamily, w):
+    """(P_iw, P_ix) of all plants (nominal last), each (N+1, F): omega/i_ref and x/i_ref."""
+    A, B, _ = fam.all_A()
+    n = A.shape[1]
+    return ss_freqresp(A, B, C_row(I_W, n), w), ss_freqresp(A, B, C_row(I_X, n), w)

@@ -1,0 +1,165 @@
+"""QFT design specification (config/qft_spec.yaml): schema and typed view (thesis 4.3.2, Table 4.5, 4.8)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Param, ParamError, Schema, load
+
+S = 'spec.'
+QFT_SPEC_SCHEMA = Schema('design_qft', [
+    # Table 4.5 uncertainty (multipliers of the nominal value) and log-grid sizes
+    Param('family.C_eq_range', 'float[]', '', [0.1, 10.0], 1e-3, 1e3, min_len=2,
+          doc='C_p, C_c, C_r scaled together'),
+    Param('family.C_eq_n', 'int', '', 5, 1, 50),
+    Param('family.D_p_range', 'float[]', '', [0.8, 1.0], 0.1, 10.0, min_len=2),
+    Param('family.D_p_n', 'int', '', 2, 1, 50),
+    Param('family.beta_range', 'float[]', '', [0.7, 1.4], 0.1, 10.0, min_len=2),
+    Param('family.beta_n', 'int', '', 3, 1, 50),
+    Param('family.k_T_range', 'float[]', '', [0.8, 1.2], 0.1, 10.0, min_len=2),
+    Param('family.k_T_n', 'int', '', 3, 1, 50),
+    Param('family.k_E_range', 'float[]', '', [0.8, 1.2], 0.1, 10.0, min_len=2),
+    Param('family.k_E_n', 'int', '', 3, 1, 50),
+    Param('family.nominal_scale', 'float[]', '', [1.0, 1.0, 1.0, 1.0, 1.0], 1e-3, 1e3, min_len=5,
+          doc='nominal plant P0 = plant.yaml values times [C_eq, D_p, beta, k_T, k_E]'),
+    Param('bounds.phase_step_deg', 'float', 'deg', 5.0, 0.1, 30.0),
+    # velocity loop, eqs. 4.52, 4.58, 4.65, 4.68-4.70
+    Param('velocity.Ws', 'float', '', 1.16, 1.0001, 10.0),
+    Param('velocity.freqs', 'float[]', 'rad/s', [0.01, 0.1, 20.0, 200.0, 300.0, 500.0], 1e-6, 1e6),
+    Param('velocity.sens_corner', 'float', 'rad/s', 600.0, 1e-3, 1e6,
+          doc='S^v(s) = (s/w)/(s/w + 1), eq. 4.58 as corrected in DESIGN.md'),
+    Param('velocity.effort_w_min', 'float', 'rad/s', 200.0, 0.0, 1e6,
+          doc='eq. 4.69 soft term applies at design frequencies >= this'),
+    Param('velocity.Tg_db', 'float', 'dB', 2.0, 0.0, 100.0, doc='T_g of eq. 4.69'),
+    Param('velocity.K_min', 'float[]', '', [0.01, 1.0, 100.0], 1e-9, 1e9, min_len=3,
+          doc='PSO lower limits of K1 [Nm/(rad/s)], K2 [Nm/rad], K3 [rad/s]'),
+    Param('velocity.K_max', 'float[]', '', [10.0, 2000.0, 20000.0], 1e-9, 1e9, min_len=3),
+    Param('velocity.iterations', 'int', '', 50, 1, 10000, doc='Table 4.8'),
+    # position loop, eqs. 4.51, 4.57, 4.59-4.63, 4.74, 4.75
+    Param('position.Ws', 'float', '', 1.305, 1.0001, 10.0),
+    Param('position.stab_freqs', 'float[]', 'rad/s',
+          [0.001, 0.01, 0.1, 1.0, 10.0, 20.0, 50.0, 100.0, 500.0], 1e-6, 1e6),
+    Param('position.sens_freqs', 'float[]', 'rad/s', [0.1, 1.0, 10.0, 20.0, 50.0, 100.0], 1e-6, 1e6),
+    Param('position.sens_corner', 'float', 'rad/s', 30.0, 1e-3, 1e6, doc='S(s) of eq. 4.57'),
+    Param('position.stiff_freqs', 'float[]', 'rad/s', [1.0, 10.0, 30.0, 50.0], 1e-6, 1e6),
+    Param('position.M_gain', 'float', 'm/N', 2.0e-6, 1e-15, 1.0, doc='eq. 4.60'),
+    Param('position.M_zero', 'float', 'rad/s', 600.0, 1e-3, 1e7),
+    Param('position.M_pole', 'float', 'rad/s', 6000.0, 1e-3, 1e7),
+    Param('position.track_freqs', 'float[]', 'rad/s', [0.01, 0.1, 1.0, 10.0, 30.0, 50.0], 1e-6, 1e6),
+    Param('position.a_up', 'float', 'rad/s', 30.0, 1e-3, 1e6, doc='eq. 4.62'),
+    Param('position.zeta_up', 'float', '', 0.8, 0.01, 10.0),
+    Param('position.wn_factor', 'float', '', 1.25, 0.01, 100.0, doc='w_n = factor a_up / zeta'),
+    Param('position.low_pole', 'float', 'rad/s', 85.0, 1e-3, 1e6, doc='eq. 4.63'),
+    Param('position.track_tol_db', 'float', 'dB', 0.05, 0.0, 10.0,
+          doc='numerical tolerance on T_low/T_up (choice): below 0.1 rad/s |T_up|/|T_low| is '
+              '< 1e-4 dB and a double-integrator loop overshoots 1 by micro-dB'),
+    Param('position.K', 'float', '(rad/s)/(m s)', 165200.0, 1e-3, 1e12,
+          doc='preselected gain of eq. 4.74 (thesis scaling factor 165200)'),
+    Param('position.zp_min', 'float', 'rad/s', 0.05, 1e-6, 1e7, doc='PSO range of z_i, p_i'),
+    Param('position.zp_max', 'float', 'rad/s', 20000.0, 1e-6, 1e7),
+    Param('position.effort_freqs', 'float[]', 'rad/s', [100.0, 500.0], 1e-6, 1e6,
+          doc='eq. 4.75 soft control-effort frequencies (k..l)'),
+    Param('position.m1', 'float', '', 1.0, 0.0, 1e9, doc='hard-constraint weight, eq. 4.75'),
+    Param('position.m2', 'float', '', 0.02, 0.0, 1e9, doc='soft effort weight, eq. 4.75'),
+    Param('position.iterations', 'int', '', 100, 1, 10000, doc='Table 4.8'),
+    # PSO, Table 4.8
+    Param('pso.particles', 'int', '', 49, 2, 10000),
+    Param('pso.W', 'float', '', 0.9, 0.0, 2.0),
+    Param('pso.C1', 'float', '', 2.0, 0.0, 10.0),
+    Param('pso.C2', 'float', '', 2.0, 0.0, 10.0),
+    Param('pso.v_max_frac', 'float', '', 0.2, 1e-3, 1.0,
+          doc='velocity clamp as fraction of the (log) range; W=0.9, C=2 diverges unclamped'),
+    Param('pso.stability_penalty', 'float', '', 1000.0, 0.0, 1e12,
+          doc='added when any family member has a closed-loop eigenvalue with Re >= 0'),
+    Param('pso.Ws_weight', 'float', '', 10.0, 0.0, 1e9, doc='eq. 4.70 weight per dB over W_s'),
+    # prefilter, eq. 4.61, 4.77
+    Param('prefilter.w_max', 'float', 'rad/s', 50.0, 1e-3, 1e6,
+          doc='tracking band checked on a dense grid from min(track_freqs) to this'),
+    Param('prefilter.bandwidth_min_hz', 'float', 'Hz', 9.0, 0.0, 1e4,
+          doc='required -3 dB bandwidth of F T on the nominal plant'),
+    Param('prefilter.corner_min', 'float', 'rad/s', 5.0, 1e-3, 1e6),
+    Param('prefilter.corner_max', 'float', 'rad/s', 2000.0, 1e-3, 1e7),
+    # verification
+    Param('verify.w_min', 'float', 'rad/s', 0.01, 1e-6, 1e6),
+    Param('verify.w_max', 'float', 'rad/s', 1000.0, 1e-6, 1e7),
+    Param('verify.n_points', 'int', '', 400, 10, 100000),
+    Param('verify.band_max_hz', 'float', 'Hz', 7.0, 1e-3, 1e4,
+          doc='sensitivity and stiffness checked up to this frequency'),
+])
+
+
+@dataclass(frozen=True)
+class QftSpec:
+    """Typed view of the validated spec dictionary (all frequencies in rad/s)."""
+
+    values: dict
+
+    def __getitem__(self, key):
+        return self.values[key]
+
+    def arr(self, key) -> np.ndarray:
+        return np.asarray(self.values[key], float)
+
+    @property
+    def velocity_freqs(self) -> np.ndarray:
+        return np.unique(self.arr('velocity.freqs'))
+
+    @property
+    def position_freqs(self) -> np.ndarray:
+        return np.unique(np.concatenate([self.arr(k) for k in (
+            'position.stab_freqs', 'position.sens_freqs', 'position.stiff_freqs',
+            'position.track_freqs')]))
+
+    # specification transfer functions, evaluated at s = j w
+    def S_v(self, w):
+        """Eq. 4.58 (corrected): S^v(s) = (s/w_c)/(s/w_c + 1)."""
+        s = 1j * np.asarray(w, float) / self['velocity.sens_corner']
+        return s / (s + 1)
+
+    def S_p(self, w):
+        """Eq. 4.57: S(s) = (s/30)/(s/30 + 1)."""
+        s = 1j * np.asarray(w, float) / self['position.sens_corner']
+        return s / (s + 1)
+
+    def M(self, w):
+        """Eq. 4.60: M(s) = 2e-6 (s + 600)^2 / (s + 6000)^2 (m/N)."""
+        s = 1j * np.asarray(w, float)
+        return self['position.M_gain'] * (s + self['position.M_zero']) ** 2 / \
+            (s + self['position.M_pole']) ** 2
+
+    def T_up(self, w):
+        """Eq. 4.62: (s/a_up + 1)/(s^2/w_n^2 + 2 zeta s/w_n + 1), w_n = 1.25 a_up/zeta."""
+        s = 1j * np.asarray(w, float)
+        a, z = self['position.a_up'], self['position.zeta_up']
+        wn = self['position.wn_factor'] * a / z
+        return (s / a + 1) / (s ** 2 / wn ** 2 + 2 * z * s / wn + 1)
+
+    def T_low(self, w):
+        """Eq. 4.63: 1/(1 + s/85)^2."""
+        s = 1j * np.asarray(w, float)
+        return 1.0 / (1 + s / self['position.low_pole']) ** 2
+
+
+def load_spec(path: str) -> QftSpec:
+    """Load and validate a qft_spec.yaml (ROS params file, node ``design_qft``)."""
+    vals = load(QFT_SPEC_SCHEMA, [path])
+    for key in ('family.C_eq_range', 'family.D_p_range', 'family.beta_range',
+                'family.k_T_range', 'family.k_E_range'):
+        if len(vals[key]) != 2 or vals[key][0] > vals[key][1]:
+            raise ParamError(f'{path}: {key} = {vals[key]!r}: expected [min, max] with min <= max')
+    for lo, hi in (('velocity.K_min', 'velocity.K_max'),):
+        if len(vals[lo]) != 3 or len(vals[hi]) != 3 or any(a >= b for a, b in zip(vals[lo], vals[hi])):
+            raise ParamError(f'{path}: {lo}/{hi} = {vals[lo]!r}/{vals[hi]!r}: expected 3 values each '
+                             f'with min < max')
+    if vals['position.zp_min'] >= vals['position.zp_max']:
+        raise ParamError(f'{path}: position.zp_min = {vals["position.zp_min"]!r}: expected < '
+                         f'position.zp_max')
+    if vals['verify.w_min'] >= vals['verify.w_max']:
+        raise ParamError(f'{path}: verify.w_min = {vals["verify.w_min"]!r}: expected < verify.w_max')
+    return QftSpec(vals)
+
+
+def default_spec() -> QftSpec:
+    """The schema defaults (= the shipped thesis specification)."""
+    return QftSpec(QFT_SPEC_SCHEMA.validate({}))

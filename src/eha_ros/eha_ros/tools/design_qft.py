@@ -1,0 +1,202 @@
+"""design_qft: QFT + PSO design of the EHA cascade controllers (thesis section 4.3).
+
+Velocity loop G_v (eq. 4.65) by PSO on the speed plant omega/i_ref of eq. 3.35, then position
+controller G (eq. 4.74) by PSO on the family of closed velocity loops, then prefilter F (4.77).
+Writes the controller YAML, the thesis' own controllers, and a report (markdown, JSON, PNGs)
+comparing both on every plant of the family."""
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import os
+import sys
+import time
+
+import numpy as np
+
+from ..core.cli import UsageError, guarded
+from ..core.params import load
+from ..core.plant.parameters import PLANT_SCHEMA
+from ..core.qft import bounds as qb
+from ..core.qft import cost, family, lti, plots, prefilter, pso, report, verify
+from ..core.qft.spec import load_spec
+
+PROG = 'design_qft'
+
+
+def parse(argv):
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0] + ' Writes '
+                                 'the controller YAML loaded by the controller node.')
+    ap.add_argument('--spec', default='config/qft_spec.yaml', help='QFT specification (ROS params file, node design_qft)')
+    ap.add_argument('--plant', default='config/plant.yaml', help='nominal plant parameters')
+    ap.add_argument('--out', default='config/controller.yaml', help='designed controller YAML')
+    ap.add_argument('--thesis-out', default=None,
+                    help='thesis controllers (eqs. 4.71, 4.76, 4.77) YAML; default: '
+                         'controller_thesis.yaml next to --out')
+    ap.add_argument('--report-dir', default=None, help='report folder (default out/qft/<timestamp>)')
+    ap.add_argument('--seed', type=int, default=1, help='PSO/DE/prefilter random seed')
+    ap.add_argument('--quick', action='store_true',
+                    help='few PSO iterations and a short cross-check (tests); result may not meet the specs')
+    ap.add_argument('--no-crosscheck', action='store_true', help='skip the differential_evolution cross-check')
+    ap.add_argument('--strict', action='store_true', help='exit 1 if the design fails any check')
+    return ap.parse_args(argv)
+
+
+def log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+def progress(name, total):
+    t0 = time.time()
+
+    def cb(k, best):
+        log(f'[{name}] iteration {k:3d}/{total}  best cost {best:.5g}  ({time.time() - t0:.1f} s)')
+    return cb
+
+
+def analyse_set(fam, spec, Gv, G, F):
+    bv = qb.velocity_bounds(spec, lambda w: family.torque_responses(fam, w)[0])
+    casc = family.velocity_loop_plants(fam, Gv)
+    bp = qb.position_bounds(spec, casc.P_omega, casc.P_d)
+    return verify.analyse(fam, spec, Gv, G, F, bv, bp), bv, bp, casc
+
+
+def main(argv=None):
+    a = parse(sys.argv[1:] if argv is None else argv)
+    spec = load_spec(a.spec)
+    plant = load(PLANT_SCHEMA, [a.plant])
+    stamp = dt.datetime.now().strftime('%Y%m%d-%H%M%S')
+    rdir = a.report_dir or os.path.join('out', 'qft', stamp)
+    try:
+        os.makedirs(rdir, exist_ok=True)
+        os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
+    except OSError as err:
+        raise UsageError(f'cannot create output folder: {err}') from None
+    t_start = time.time()
+    fam = family.build_family(plant, spec)
+    log(f'{PROG}: family of {fam.n} plants, velocity design frequencies {list(spec.velocity_freqs)} rad/s')
+    pp = dict(particles=spec['pso.particles'], W=spec['pso.W'], C1=spec['pso.C1'],
+              C2=spec['pso.C2'], v_max_frac=spec['pso.v_max_frac'], seed=a.seed)
+    it_v = 4 if a.quick else spec['velocity.iterations']
+    it_p = 4 if a.quick else spec['position.iterations']
+    if a.quick:
+        pp['particles'] = min(pp['particles'], 12)
+    summary = {'spec': a.spec, 'plant': a.plant, 'seed': a.seed, 'quick': a.quick}
+
+    # velocity loop
+    bv = qb.velocity_bounds(spec, lambda w: family.torque_responses(fam, w)[0])
+    qb.check_feasible(bv, spec, 'velocity')
+    vc = cost.VelocityCost(fam, spec, bv)
+    lo_v, hi_v = np.log10(spec['velocity.K_min']), np.log10(spec['velocity.K_max'])
+    rv = pso.pso(vc, lo_v, hi_v, iterations=it_v, progress=progress('G_v PSO', it_v), **pp)
+    Gv = cost.velocity_ctrl(rv.x, fam.k_T_nominal)
+    K1, K2, K3 = (10 ** rv.x).tolist()
+    summary['velocity'] = {'K1': K1, 'K2': K2, 'K3': K3, 'pso_cost': rv.cost}
+    log(f'{PROG}: G_v = (1/k_T)({K1:.4g} + {K2:.4g}/s)/(s/{K3:.4g} + 1), cost {rv.cost:.4g}')
+
+    # position loop on the family of closed velocity loops
+    casc = family.velocity_loop_plants(fam, Gv)
+    bp = qb.position_bounds(spec, casc.P_omega, casc.P_d)
+    qb.check_feasible(bp, spec, 'position')
+    pc = cost.PositionCost(casc, spec, bp)
+    lo_p = np.full(6, np.log10(spec['position.zp_min']))
+    hi_p = np.full(6, np.log10(spec['position.zp_max']))
+    rp = pso.pso(pc, lo_p, hi_p, iterations=it_p, progress=progress('G PSO', it_p), **pp)
+    G = cost.position_ctrl(rp.x, spec['position.K'])
+    zp = (10 ** rp.x).tolist()
+    summary['position'] = {'K': spec['position.K'], 'z': zp[:3], 'p': zp[3:], 'pso_cost': rp.cost}
+    log(f'{PROG}: G = {spec["position.K"]:g}/s prod(1+s/z)/(1+s/p), z = '
+        f'{[round(v, 4) for v in zp[:3]]}, p = {[round(v, 4) for v in zp[3:]]}, cost {rp.cost:.4g}')
+
+    if not a.no_crosscheck:
+        log(f'{PROG}: cross-check with scipy differential_evolution (same costs)')
+        mi = 3 if a.quick else 25
+        xv, fv, nv = pso.de_crosscheck(vc, lo_v, hi_v, seed=a.seed, maxiter=mi, popsize=8)
+        xp, fp, npv = pso.de_crosscheck(pc, lo_p, hi_p, seed=a.seed, maxiter=mi, popsize=8)
+        summary['crosscheck'] = {'velocity': {'pso_cost': rv.cost, 'de_cost': fv, 'de_nfev': nv,
+                                              'de_x': (10 ** xv).tolist()},
+                                 'position': {'pso_cost': rp.cost, 'de_cost': fp, 'de_nfev': npv,
+                                              'de_x': (10 ** xp).tolist()}}
+        log(f'{PROG}: DE best cost velocity {fv:.4g} (PSO {rv.cost:.4g}), position {fp:.4g} (PSO {rp.cost:.4g})')
+
+    # prefilter
+    wt = prefilter.band_grid(spec, 200)
+    Lt = casc.P_omega(wt) * G.freq(wt)[None]
+    wf = np.logspace(-1, 4, 1500)
+    Lf = casc.P_omega(wf)[-1] * G.freq(wf)
+    F, finfo = prefilter.design_prefilter(spec, Lt / (1 + Lt), Lf / (1 + Lf), wf, seed=a.seed,
+                                          maxiter=10 if a.quick else 60)
+    summary['prefilter'] = finfo
+    log(f'{PROG}: F corners a, b, c = {[round(v, 3) for v in finfo["corners"]]} rad/s, '
+        f'tracking margin {finfo["margin_db"]:.3g} dB, nominal bandwidth {finfo["bandwidth_nominal_hz"]:.3g} Hz')
+
+    # analysis of both controller sets
+    res_d = verify.analyse(fam, spec, Gv, G, F, bv, bp)
+    Gv_t = lti.thesis_velocity(fam.k_T_nominal)
+    res_t, bv_t, bp_t, casc_t = analyse_set(fam, spec, Gv_t, lti.thesis_position(),
+                                            lti.thesis_prefilter())
+    summary['phase_grid_step_deg'] = spec['bounds.phase_step_deg']
+    summary['phase_resolution_db'] = {
+        'velocity': dict(zip([f'{w:g}' for w in bv.w], qb.phase_resolution_db(bv.merged).tolist())),
+        'position': dict(zip([f'{w:g}' for w in bp.w], qb.phase_resolution_db(bp.merged).tolist()))}
+    summary['designed'] = res_d
+    summary['thesis'] = res_t
+    summary['elapsed_s'] = time.time() - t_start
+
+    # files
+    header = (f'QFT design by scripts/design_qft: spec {a.spec}, plant {a.plant}, seed {a.seed}'
+              f'{", QUICK (not a full design)" if a.quick else ""}, {dt.datetime.now().isoformat(timespec="seconds")}\n'
+              f'G_v = (1/k_T)({K1:.6g} + {K2:.6g}/s)/(s/{K3:.6g} + 1), k_T = {fam.k_T_nominal}\n'
+              f'G = {spec["position.K"]:g}/s prod (1 + s/z_i)/(1 + s/p_i), z = {[float(f"{v:.6g}") for v in zp[:3]]}, '
+              f'p = {[float(f"{v:.6g}") for v in zp[3:]]}\n'
+              f'F corners (a, b, c) = {[float(f"{v:.6g}") for v in finfo["corners"]]} rad/s\n'
+              f'all checks on the {fam.n}-plant family: {"PASS" if res_d["all_pass"] else "FAIL"} (report {rdir})')
+    report.write_controller_yaml(a.out, Gv, G, F, header)
+    tout = a.thesis_out or os.path.join(os.path.dirname(os.path.abspath(a.out)), 'controller_thesis.yaml')
+    report.write_controller_yaml(tout, Gv_t, lti.thesis_position(), lti.thesis_prefilter(),
+                                 'Thesis controllers: G_v eq. 4.71, G eq. 4.76, F eq. 4.77 '
+                                 f'(written by scripts/design_qft, k_T = {fam.k_T_nominal})')
+    plots.nichols(os.path.join(rdir, 'nichols_velocity.png'), bv,
+                  lambda w: family.torque_responses(fam, w)[0][-1] * Gv.freq(w),
+                  'velocity loop: merged bounds and designed L_v0')
+    plots.nichols(os.path.join(rdir, 'nichols_position.png'), bp,
+                  lambda w: casc.P_omega(w)[-1] * G.freq(w), 'position loop: merged bounds and designed L0')
+    plots.nichols(os.path.join(rdir, 'nichols_position_thesis.png'), bp_t,
+                  lambda w: casc_t.P_omega(w)[-1] * lti.thesis_position().freq(w),
+                  'position loop: bounds (thesis G_v) and thesis L0 (eq. 4.76)')
+    wb = np.logspace(-1, np.log10(2000), 600)
+    for name, (cs, Gx, Fx) in {'designed': (casc, G, F),
+                               'thesis': (casc_t, lti.thesis_position(), lti.thesis_prefilter())}.items():
+        Lb = cs.P_omega(wb) * Gx.freq(wb)[None]
+        plots.closed_loop_bode(os.path.join(rdir, f'bode_closed_loop_{name}.png'), wb,
+                               Fx.freq(wb)[None] * Lb / (1 + Lb), spec,
+                               f'closed-loop family F T ({name})')
+    plots.convergence(os.path.join(rdir, 'pso_convergence.png'),
+                      {'G_v (velocity)': rv.history, 'G (position)': rp.history})
+    md = ['# QFT design report', '', '```', header, '```', '',
+          f'Family: {fam.n} plants (Table 4.5 grid), nominal = plant.yaml x {spec["family.nominal_scale"]}.',
+          'Velocity loop designed on omega/i_ref (speed output of eq. 3.35; the thesis writes P_i in 4.52).',
+          f'Dense-grid checks: {spec["verify.n_points"]} points {spec["verify.w_min"]}..{spec["verify.w_max"]} rad/s; '
+          f'sensitivity and stiffness up to {spec["verify.band_max_hz"]} Hz; tracking up to {spec["prefilter.w_max"]} rad/s '
+          f'with tolerance {spec["position.track_tol_db"]} dB.', '',
+          report.markdown({'designed': res_d, 'thesis (4.71/4.76/4.77)': res_t}), '',
+          f'Phase grid {spec["bounds.phase_step_deg"]} deg: worst bound change between adjacent phases (dB) = '
+          f'{summary["phase_resolution_db"]}', '',
+          'Figures: nichols_velocity.png, nichols_position.png, nichols_position_thesis.png, '
+          'bode_closed_loop_designed.png, bode_closed_loop_thesis.png, pso_convergence.png']
+    with open(os.path.join(rdir, 'report.md'), 'w', encoding='utf-8') as fh:
+        fh.write('\n'.join(md) + '\n')
+    report.write_json(os.path.join(rdir, 'report.json'), summary)
+    print(report.markdown({'designed': res_d, 'thesis': res_t}))
+    print(f'{PROG}: wrote {a.out}, {tout} and report {rdir} in {summary["elapsed_s"]:.1f} s; '
+          f'designed controller {"meets every check" if res_d["all_pass"] else "FAILS some checks"} '
+          f'on all {fam.n} plants')
+    return 1 if (a.strict and not res_d['all_pass']) else 0
+
+
+def run():
+    sys.exit(guarded(PROG, main))
+
+
+if __name__ == '__main__':
+    run()
