@@ -1,25 +1,21 @@
 """plant_sim as a separate process over DDS: 1 kHz stream, commands applied, faults visible,
 bad inputs rejected and reported, lock-step, bad parameters."""
 import math
-import os
 import subprocess
 import time
 
 import numpy as np
 import pytest
 
-from ros_util import ROOT, VENV_BIN, start_process, stop_process, wait_for
+from eha_ros.stack import node_command
+from ros_util import start_process, stop_process, wait_for
 
 pytestmark = pytest.mark.ros
-CONFIG = [os.path.join(ROOT, 'config', 'plant.yaml'), os.path.join(ROOT, 'config', 'plant_sim.yaml')]
 D_P, A_P = 6.684e-7, 2.572e-3
 
 
 def plant_cmd(*extra):
-    args = [os.path.join(VENV_BIN, 'plant_sim'), '--ros-args']
-    for f in CONFIG:
-        args += ['--params-file', f]
-    return args + list(extra)
+    return node_command('plant_sim', extra=extra)
 
 
 class Probe:

@@ -92,9 +92,11 @@ def node_realtime(duration: float = 10.0) -> dict:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from eha_msgs.msg import ActuatorCommand, ActuatorState
-    from . import _nodes
+    from ..stack import Stack
+    from ._nodes import cpu_seconds
 
-    proc = _nodes.start(_nodes.node_command('plant_sim', ['plant.yaml', 'plant_sim.yaml']))
+    stack = Stack(['plant_sim']).start()
+    proc = stack.procs['plant_sim']
     rclpy.init()
     node = rclpy.create_node('bench_plant')
     stamps, seqs, diags = [], [], []
@@ -121,12 +123,12 @@ def node_realtime(duration: float = 10.0) -> dict:
             rclpy.spin_once(node, timeout_sec=0.05)
         if not seqs:
             raise RuntimeError('plant_sim published no state within 60 s: '
-                               + _nodes.stop(proc)[-300:])
+                               + stack.stop()['plant_sim'][1][-300:])
         stamps.clear(); seqs.clear()
-        cpu0, wall0 = _nodes.cpu_seconds(proc.pid), time.monotonic()
+        cpu0, wall0 = cpu_seconds(proc.pid), time.monotonic()
         while time.monotonic() - wall0 < duration:
             rclpy.spin_once(node, timeout_sec=0.05)
-        cpu1, wall1 = _nodes.cpu_seconds(proc.pid), time.monotonic()
+        cpu1, wall1 = cpu_seconds(proc.pid), time.monotonic()
         t_diag = time.monotonic() + 3
         n_diag = len(diags)
         while len(diags) == n_diag and time.monotonic() < t_diag:
@@ -134,7 +136,7 @@ def node_realtime(duration: float = 10.0) -> dict:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-        _nodes.stop(proc)
+        stack.stop()
     st, sq = np.array(stamps), np.array(seqs)
     period = np.diff(st)
     d = diags[-1] if diags else {}

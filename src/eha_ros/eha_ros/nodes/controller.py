@@ -1,11 +1,162 @@
-"""controller node (not built yet: issue 6)."""
+"""controller node: answers each eha/estimate with one eha/command (same seq) from the QFT
+position controller (core.controller.PositionController), follows eha/reference, holds its
+integrator through channel switches (eha/redundancy), and goes to zero speed when estimates
+stop or go stale for more than watchdog_ticks (recovering without a jump)."""
+from __future__ import annotations
+
 import sys
+import time
 
-from .common import not_implemented
+import numpy as np
+
+from ..core.controller.params import SCHEMA
+from ..core.controller.position import PositionController
+from ..core.stats import Counters, RingStats
+from . import diag
+from .common import declare_and_validate, latched_qos, run, stream_qos
 
 
-def main() -> int:
-    return not_implemented('controller', 6)
+def drive_mismatch(p: dict) -> float:
+    """Relative mismatch between velocity_controller (YAML) and the drive gains of plant.yaml."""
+    k_t, kp, ki, wl = (p['plant.motor.k_T'], p['plant.drive.Kp_w'], p['plant.drive.Ki_w'],
+                       p['plant.drive.lowpass_w'])
+    num = np.array(p['velocity_controller.num'], float)
+    den = np.array(p['velocity_controller.den'], float)
+    num, den = num / den[0], den / den[0]
+    want_num, want_den = np.array([wl * kp / k_t, wl * ki / k_t]), np.array([1.0, wl, 0.0])
+    if num.shape != want_num.shape or den.shape != want_den.shape:
+        return float('inf')
+    return float(max(np.max(np.abs(num - want_num) / np.abs(want_num)),
+                     abs(den[1] - wl) / wl, abs(den[2])))
+
+
+def make_node(params: dict):
+    from rclpy.node import Node
+    from eha_msgs.msg import (ActuatorCommand, PositionEstimate, PositionReference,
+                              RedundancyStatus)
+
+    class Controller(Node):
+        def __init__(self):
+            super().__init__('controller')
+            self.p = p = declare_and_validate(self, SCHEMA, params)
+            self.Ts = p['plant.sim.Ts']
+            self.c = Counters()
+            prewarp = 2 * np.pi * p['control.prewarp_hz'] or None
+            self.ctl = PositionController(
+                (p['position_controller.num'], p['position_controller.den']),
+                (p['prefilter.num'], p['prefilter.den']), self.Ts, p['plant.drive.omega_max'],
+                p['plant.cylinder.stroke'], p['control.stroke_margin'], p['control.rate_limit'],
+                p['control.antiwindup'], prewarp_w=prewarp, counters=self.c)
+            self.mismatch = drive_mismatch(p)
+            if self.mismatch > p['control.drive_check_tolerance']:
+                self.get_logger().warning(
+                    f'velocity_controller differs from the drive gains in plant.drive by '
+                    f'{100 * self.mismatch:.1f} %: the design assumed another velocity loop')
+            self.watchdog_s = p['control.watchdog_ticks'] * self.Ts
+            self.switch_ticks = int(round(p['control.switch_hold'] / self.Ts))
+            self.last_good = None          # monotonic time of the last fresh estimate
+            self.tripped = False
+            self.last_seq = 0
+            self.last_speed = 0.0
+            self.active_channel = None
+            self.exec_time = RingStats()
+            self.cmd = ActuatorCommand()
+            qos = stream_qos()
+            self.pub = self.create_publisher(ActuatorCommand, 'eha/command', qos)
+            self.pub_diag = diag.publisher(self)
+            self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
+            self.create_subscription(PositionReference, 'eha/reference', self.on_reference, qos)
+            self.create_subscription(RedundancyStatus, 'eha/redundancy', self.on_redundancy,
+                                     latched_qos())
+            # checking at half the watchdog time keeps the reaction within watchdog_ticks
+            # without a second 1 kHz callback in the executor
+            self.create_timer(max(self.Ts, 0.5 * self.watchdog_s), self.watchdog)
+            self.create_timer(p['control.diagnostics_period'], self.publish_diagnostics)
+            self.get_logger().info(
+                f'controller: QFT G (order {len(p["position_controller.den"]) - 1}) and F at '
+                f'{1 / self.Ts:.0f} Hz, Tustin{" prewarped" if prewarp else ""}, '
+                f'speed clamp {p["plant.drive.omega_max"]:.0f} rad/s')
+
+        def on_reference(self, msg):
+            clamped = self.c.get('clamped_references', 0)
+            if not self.ctl.request(msg.position):
+                self.get_logger().warning('reference rejected (not finite); holding the last '
+                                          'good one', throttle_duration_sec=1.0)
+            elif self.c.get('clamped_references', 0) > clamped:
+                self.get_logger().warning(
+                    f'reference {msg.position * 1e3:.1f} mm is beyond the stroke: clamped to '
+                    f'+-{self.ctl.ref.limit * 1e3:.1f} mm', throttle_duration_sec=1.0)
+
+        def on_redundancy(self, msg):
+            if self.active_channel is not None and msg.active_channel != self.active_channel:
+                self.ctl.hold_integrator(self.switch_ticks)
+                self.c.bump('channel_switches')
+            elif msg.state == 'SWITCHING':
+                self.ctl.hold_integrator(self.switch_ticks)
+            self.active_channel = msg.active_channel
+
+        def on_estimate(self, msg):
+            t0 = time.perf_counter()
+            now = time.monotonic()
+            self.last_seq = msg.seq
+            fresh = not msg.stale and np.isfinite(msg.position)
+            if not fresh:
+                self.c.bump('stale_estimates')
+            if fresh:
+                self.last_good = now
+                if self.tripped:
+                    self.tripped = False
+                    self.ctl.start(msg.position)       # bumpless: zero output, reference ramps
+                    self.get_logger().info('estimates back: control resumed from the piston '
+                                           'position')
+                out = self.ctl.update(msg.position)
+                speed, saturated = out.speed_ref, out.saturated
+            elif self.tripped or self.last_good is None:
+                speed, saturated = 0.0, False
+            else:
+                speed, saturated = self.last_speed, False    # short gap: hold
+            self.send(msg.seq, speed, saturated, msg.header.stamp)
+            self.exec_time.add(time.perf_counter() - t0)
+
+        def send(self, seq, speed, saturated, stamp=None):
+            c = self.cmd
+            if stamp is not None:
+                c.header.stamp = stamp
+            c.seq = int(seq)
+            c.motor_speed_ref = float(speed)
+            c.saturated = bool(saturated)
+            self.pub.publish(c)
+            self.last_speed = speed
+
+        def watchdog(self):
+            """No fresh estimate for watchdog_ticks: command zero speed (repeated), report."""
+            if self.last_good is None:
+                return
+            if time.monotonic() - self.last_good > self.watchdog_s:
+                if not self.tripped:
+                    self.tripped = True
+                    self.c.bump('watchdog_trips')
+                    self.get_logger().warning(
+                        f'no fresh estimate for {self.watchdog_s * 1e3:.0f} ms: commanding zero '
+                        f'motor speed')
+                self.send(self.last_seq, 0.0, False)
+
+        def publish_diagnostics(self):
+            ex = self.exec_time.summary()
+            values = {'exec_mean_s': ex['mean'], 'exec_p99_s': ex['p99'], 'exec_max_s': ex['max'],
+                      'watchdog_tripped': self.tripped, 'drive_gain_mismatch': self.mismatch}
+            values.update(self.c)
+            warn = self.tripped or self.c.get('rejected_references', 0) > 0 or \
+                self.mismatch > self.p['control.drive_check_tolerance']
+            diag.publish(self, self.pub_diag, 'loop', values, diag.WARN if warn else diag.OK,
+                         'watchdog tripped' if self.tripped else
+                         ('inputs rejected or drive mismatch' if warn else 'ok'))
+
+    return Controller()
+
+
+def main(argv=None) -> int:
+    return run('controller', SCHEMA, make_node, argv)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,1 @@
+"""Position control at Ts: discretised QFT controller and prefilter, reference handling, watchdog."""

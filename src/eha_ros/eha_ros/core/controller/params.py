@@ -1,0 +1,32 @@
+"""Parameters of the controller node: transfer functions from design_qft (config/controller.yaml),
+loop settings (config/controller_node.yaml) and the shared plant.* set (config/plant.yaml)."""
+from __future__ import annotations
+
+from ..params import Param, Schema
+from ..plant.parameters import PLANT_SCHEMA
+
+TF = [Param(f'{name}.{part}', 'float[]', unit, doc=doc)
+      for name, unit, doc in (
+          ('position_controller', '(rad/s)/m', 'G(s), eq. 4.74, continuous, descending powers'),
+          ('prefilter', 'm/m', 'F(s), eq. 4.77'),
+          ('velocity_controller', 'A/(rad/s)', 'G_v(s), eq. 4.65 incl. 1/k_T (drive)'))
+      for part in ('num', 'den')]
+
+NODE = Schema('controller', TF + [
+    Param('control.stroke_margin', 'float', 'm', 0.005, 0.0, 0.05,
+          doc='references are clamped to +-(stroke/2 - margin)'),
+    Param('control.rate_limit', 'float', 'm/s', 0.19, 1e-3, 10.0,
+          doc='reference rate limit (Table 3.1: 190 mm/s)'),
+    Param('control.antiwindup', 'bool', '', True, doc='conditional integration at the clamp'),
+    Param('control.prewarp_hz', 'float', 'Hz', 0.0, 0.0, 200.0,
+          doc='Tustin prewarp frequency; 0 = plain Tustin'),
+    Param('control.watchdog_ticks', 'int', '', 5, 1, 1000,
+          doc='no (or stale) estimate for more ticks: zero speed, reported'),
+    Param('control.switch_hold', 'float', 's', 0.02, 0.0, 1.0,
+          doc='integrator held this long after the active channel changes'),
+    Param('control.drive_check_tolerance', 'float', '', 0.01, 0.0, 1.0,
+          doc='relative mismatch between velocity_controller and plant.drive gains to report'),
+    Param('control.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+])
+
+SCHEMA = PLANT_SCHEMA + NODE

@@ -1,0 +1,120 @@
+"""controller as a separate process over DDS: one command per estimate with the same seq,
+watchdog to zero speed and bumpless recovery, bad references reported, bad parameters."""
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from eha_ros.stack import node_command
+from ros_util import start_process, stop_process, wait_for
+
+pytestmark = pytest.mark.ros
+
+
+def controller_cmd(*extra, files=None):
+    return node_command('controller', extra=('-r', '__ns:=/ct') + extra, files=files)
+
+
+class FakeEstimator:
+    """Publishes estimates at ~1 kHz from a thread; records the commands that answer them."""
+
+    def __init__(self, node):
+        from eha_msgs.msg import ActuatorCommand, PositionEstimate, PositionReference
+        from diagnostic_msgs.msg import DiagnosticArray
+        self.Est, self.Ref = PositionEstimate, PositionReference
+        self.pub = node.create_publisher(PositionEstimate, '/ct/eha/estimate', 10)
+        self.ref_pub = node.create_publisher(PositionReference, '/ct/eha/reference', 10)
+        self.commands, self.diags = [], []
+        node.create_subscription(ActuatorCommand, '/ct/eha/command', self.commands.append, 1000)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 10)
+        self.seq, self.position, self.stale, self.running = 0, 0.0, False, True
+        self.paused = False
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _diag(self, msg):
+        for st in msg.status:
+            if st.name.startswith('controller'):
+                self.diags.append({kv.key: kv.value for kv in st.values})
+
+    def _run(self):
+        while self.running:
+            if not self.paused:
+                self.seq += 1
+                self.pub.publish(self.Est(seq=self.seq, position=self.position, stale=self.stale))
+            time.sleep(0.001)
+
+    def close(self):
+        self.running = False
+        self.thread.join()
+
+
+@pytest.fixture
+def ctl(ros_node):
+    proc = start_process(controller_cmd())
+    est = FakeEstimator(ros_node)
+    try:
+        assert wait_for(lambda: len(est.commands) > 100, 60), 'controller does not answer'
+        yield est
+    finally:
+        est.close()
+        code, out, err = stop_process(proc)
+        assert 'Traceback' not in err, err
+
+
+def test_one_command_per_estimate_with_same_seq(ctl):
+    ctl.ref_pub.publish(ctl.Ref(position=0.002))
+    time.sleep(1.0)
+    est_seqs = set(range(ctl.seq - 800, ctl.seq - 100))
+    cmd_seqs = [c.seq for c in ctl.commands if c.seq in est_seqs]
+    assert len(cmd_seqs) >= 0.99 * len(est_seqs)
+    assert len(cmd_seqs) == len(set(cmd_seqs)), 'more than one command for an estimate'
+    # piston held at 0 with a 2 mm reference: the controller drives positive, clamped
+    assert ctl.commands[-1].motor_speed_ref > 0
+
+
+def test_watchdog_zero_speed_and_bumpless_recovery(ctl):
+    ctl.ref_pub.publish(ctl.Ref(position=0.0))
+    ctl.position = 0.0
+    time.sleep(0.5)
+    ctl.paused = True                       # estimator dies
+    time.sleep(0.1)
+    zeros = ctl.commands[-20:]
+    assert all(c.motor_speed_ref == 0.0 for c in zeros)
+    assert wait_for(lambda: ctl.diags and int(ctl.diags[-1].get('watchdog_trips', 0)) >= 1, 5)
+    n = len(ctl.commands)
+    ctl.position = 0.003                    # the piston drifted 3 mm meanwhile
+    ctl.paused = False
+    assert wait_for(lambda: len(ctl.commands) > n + 30, 5)
+    after = np.array([c.motor_speed_ref for c in ctl.commands[n:n + 30]])
+    # recovery starts at zero output (reference restarted at the piston) and ramps with the
+    # rate-limited reference; restarting on the 3 mm error would jump to the 838 rad/s clamp
+    assert np.all(np.abs(after[:5]) < 50.0), after[:10]
+    assert np.all(np.abs(after[:10]) < 838.0)
+
+
+def test_stale_estimates_trip_watchdog(ctl):
+    time.sleep(0.3)
+    ctl.stale = True
+    time.sleep(0.2)
+    assert all(c.motor_speed_ref == 0.0 for c in ctl.commands[-50:])
+    ctl.stale = False
+
+
+def test_bad_references_rejected_and_reported(ctl):
+    ctl.ref_pub.publish(ctl.Ref(position=float('nan')))
+    ctl.ref_pub.publish(ctl.Ref(position=0.5))
+    assert wait_for(lambda: ctl.diags and int(ctl.diags[-1].get('rejected_references', 0)) >= 1
+                    and int(ctl.diags[-1].get('clamped_references', 0)) >= 1, 5)
+    assert all(np.isfinite(c.motor_speed_ref) for c in ctl.commands)
+
+
+def test_missing_transfer_function_stops_node_with_one_line(tmp_path):
+    res = subprocess.run(controller_cmd(files=['plant.yaml', 'controller_node.yaml']),
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'Traceback' not in res.stderr, res.stderr
+    assert "missing required parameter 'position_controller.num'" in lines[0]
