@@ -35,17 +35,33 @@ def test_wildcard_then_node_section_nested_keys(tmp_path):
     assert values['mode'] == 'pva' and values['count'] == 3     # defaults filled
 
 
-def test_later_file_and_overrides_win(tmp_path):
+def test_precedence_mirrors_rclpy(tmp_path):
+    """Later wins within a class; named (node section, -p node:key) beats wildcard
+    (/** section, plain -p) whatever the order -- what rclpy applies (rclpy PR #547)."""
     a = write(tmp_path, 'demo:\n  ros__parameters:\n    gain: {ki: 1.0, kp: 1.0}\n', 'a.yaml')
-    b = write(tmp_path, 'demo:\n  ros__parameters:\n    gain: {ki: 2.0}\n', 'b.yaml')
-    values = load(SCHEMA, [a, b], {'gain.kp': 9})
-    assert (values['gain.ki'], values['gain.kp']) == (2.0, 9.0)
+    b = write(tmp_path, 'demo:\n  ros__parameters:\n    gain: {ki: 2.0}\n'
+                        '/**:\n  ros__parameters:\n    count: 4\n', 'b.yaml')
+    values = load(SCHEMA, [a, b], {'gain.kp': 9, 'count': 5, 'demo:gain.ki': 7.0,
+                                   'other:gain.kp': 8.0})
+    assert values['gain.kp'] == 1.0            # plain -p does not beat the node's section
+    assert values['gain.ki'] == 7.0            # -p demo:gain.ki:=7 does
+    assert values['count'] == 5                # plain -p beats a wildcard section
+
+
+def test_section_matching_like_rcl():
+    from eha_ros.core.params import _section_class as kind
+    assert kind('demo', '/demo') == 'named' and kind('demo', '/eha/demo') is None
+    assert kind('/eha/demo', '/eha/demo') == 'named'
+    assert kind('/**', '/eha/demo') == 'wild' and kind('/**/demo', '/demo') == 'wild'
+    assert kind('/**/demo', '/eha/x/demo') == 'wild' and kind('/eha/*', '/eha/demo') == 'wild'
+    assert kind('/*/demo', '/demo') is None
 
 
 def test_remapped_node_name_and_namespace(tmp_path):
     f = write(tmp_path, '/eha/demo2:\n  ros__parameters:\n    gain: {ki: 4.0}\n')
     assert read_params_file(f, 'demo2', '/eha') == {'gain.ki': 4.0}
     assert read_params_file(f, 'demo', '/eha') == {}
+    assert read_params_file(f, 'demo2', '/') == {}
 
 
 def test_parse_ros_args():

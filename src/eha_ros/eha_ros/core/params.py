@@ -168,15 +168,30 @@ def flatten(tree: Mapping, prefix: str = '') -> dict:
     return out
 
 
-def _section_matches(section: str, node: str, namespace: str) -> bool:
-    """Does a params-file top-level key apply to ``namespace``/``node``?"""
-    full = (namespace.rstrip('/') + '/' + node) if namespace not in ('', '/') else '/' + node
-    return section in ('/**', node, '/' + node, full, '/**/' + node) or \
-        (section.startswith('/**') and full.endswith(section[3:]) and section[3:].startswith('/'))
+def fully_qualified(node: str, namespace: str = '/') -> str:
+    ns = namespace.strip('/')
+    return f'/{ns}/{node}' if ns else f'/{node}'
 
 
-def read_params_file(path: str, node: str, namespace: str = '/') -> dict:
-    """Read one ROS params file; return this node's flattened parameters (wildcards first)."""
+def _section_class(section: str, fqn: str):
+    """How a params-file top-level key applies to a node, as rcl/rclpy do it.
+
+    Returns 'wild' (wildcard section that matches), 'named' (the node's fully qualified name;
+    a name without a leading slash is taken from the root), or None. rclpy gives named
+    assignments precedence over wildcard ones whatever their order (rclpy PR #547).
+    """
+    import re
+    name = section if section.startswith('/') else '/' + section
+    if '*' not in name:
+        return 'named' if name == fqn else None
+    # '**' matches zero or more namespace tokens, '*' one token (or part of one)
+    regex = ''.join('(/[^/]+)*' if t == '**' else '/' + re.escape(t).replace(r'\*', '[^/]*')
+                    for t in name.split('/')[1:])
+    return 'wild' if re.fullmatch(regex, fqn) else None
+
+
+def read_params_sections(path: str, node: str, namespace: str = '/') -> tuple[dict, dict]:
+    """Read one ROS params file: (wildcard assignments, named assignments) for this node."""
     try:
         with open(path, encoding='utf-8') as fh:
             text = fh.read()
@@ -192,16 +207,17 @@ def read_params_file(path: str, node: str, namespace: str = '/') -> dict:
         problem = getattr(err, 'problem', None) or str(err).splitlines()[0]
         raise ParamError(f'{path}: malformed YAML{where}: {problem}: expected a ROS params file '
                          f'(node: ros__parameters: ...)') from None
+    wild: dict = {}
+    named: dict = {}
     if doc is None:
-        return {}
+        return wild, named
     if not isinstance(doc, Mapping):
         raise ParamError(f'{path}: top level is {type(doc).__name__}: expected a mapping of '
                          f'node names to ros__parameters')
-    values: dict = {}
-    # Wildcard sections first so that a node's own section overrides them.
-    ordered = sorted(doc.items(), key=lambda kv: 0 if str(kv[0]).startswith('/**') else 1)
-    for section, body in ordered:
-        if not _section_matches(str(section), node, namespace):
+    fqn = fully_qualified(node, namespace)
+    for section, body in doc.items():
+        kind = _section_class(str(section), fqn)
+        if kind is None:
             continue
         if not isinstance(body, Mapping) or 'ros__parameters' not in body:
             raise ParamError(f'{path}: section {section!r} = {body!r}: expected a mapping with '
@@ -215,8 +231,14 @@ def read_params_file(path: str, node: str, namespace: str = '/') -> dict:
             continue
         if not isinstance(params, Mapping):
             raise ParamError(f'{path}: {section}.ros__parameters = {params!r}: expected a mapping')
-        values.update(flatten(params))
-    return values
+        (wild if kind == 'wild' else named).update(flatten(params))
+    return wild, named
+
+
+def read_params_file(path: str, node: str, namespace: str = '/') -> dict:
+    """This node's flattened parameters from one file (named sections over wildcards)."""
+    wild, named = read_params_sections(path, node, namespace)
+    return {**wild, **named}
 
 
 # Parameters every rclpy node accepts; batch code ignores them.
@@ -225,21 +247,38 @@ ROS_BUILTINS = ('use_sim_time', 'start_type_description_service')
 
 def load(schema: Schema, files: Sequence[str] = (), overrides: Mapping[str, Any] | None = None,
          node: str | None = None, namespace: str = '/') -> dict:
-    """Merge params files (later wins) and overrides, validate, fill defaults."""
+    """Merge params files and overrides with rclpy's precedence, validate, fill defaults.
+
+    Within a class later assignments win (files in order, then ``-p``); named assignments
+    (the node's own sections, ``-p node:key:=value``) win over wildcard ones (``/**``
+    sections, plain ``-p key:=value``), exactly as rclpy applies them.
+    """
     node = node or schema.node
-    values: dict = {}
+    fqn = fully_qualified(node, namespace)
+    wild: dict = {}
+    named: dict = {}
     sources: dict = {}
     for path in files:
-        for key, value in read_params_file(path, node, namespace).items():
-            values[key] = value
-            sources[key] = path
+        w, n = read_params_sections(path, node, namespace)
+        for target, part in ((wild, w), (named, n)):
+            for key, value in part.items():
+                target[key] = value
+                sources[(target is named, key)] = path
     for key, value in (overrides or {}).items():
-        values[key] = value
-        sources[key] = 'command line'
+        target, name = wild, key
+        if ':' in key:
+            who, _, name = key.partition(':')
+            if who not in (node, fqn, fqn.lstrip('/')):
+                continue
+            target = named
+        target[name] = value
+        sources[(target is named, name)] = 'command line'
+    values = {**wild, **named}
+    where = {k: sources.get((k in named, k)) for k in values}
     for key in ROS_BUILTINS:
         values.pop(key, None)
     context = ', '.join(files) if files else 'defaults'
-    return schema.validate(values, sources, context)
+    return schema.validate(values, where, context)
 
 
 def default_config_dir() -> str:
