@@ -8,6 +8,9 @@ from .params import ParamError, Schema
 # node -> (module, attribute) of its full schema
 _REGISTRY = {
     'plant_sim': ('eha_ros.core.plant_sim_params', 'SCHEMA'),
+    'estimator': ('eha_ros.core.estimator.params', 'SCHEMA'),
+    'controller': ('eha_ros.core.controller.params', 'SCHEMA'),
+    'sweep': ('eha_ros.core.sweep.params', 'SCHEMA'),
 }
 
 

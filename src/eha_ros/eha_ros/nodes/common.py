@@ -73,8 +73,8 @@ def run(name: str, schema: Schema, make_node: Callable, argv=None) -> int:
             node = make_node(params)
             executor = make_executor()
             executor.add_node(node)
-            while not stop.is_set() and rclpy.ok():
-                executor.spin_once(timeout_sec=0.1)
+            while not stop.is_set() and rclpy.ok() and not getattr(node, 'done', False):
+                executor.spin_once(timeout_sec=0.1)     # a node may end itself (node.done)
         except KeyboardInterrupt:
             pass
         finally:
@@ -84,7 +84,7 @@ def run(name: str, schema: Schema, make_node: Callable, argv=None) -> int:
                     close()
                 node.destroy_node()
             rclpy.try_shutdown()
-        return 0
+        return int(getattr(node, 'exit_code', 0) or 0)
 
     return guarded(name, main)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections import deque
 
 import numpy as np
 
@@ -59,6 +60,7 @@ def make_node(params: dict):
             self.last_seq = 0
             self.last_speed = 0.0
             self.active_channel = None
+            self.pending = deque(maxlen=2000)   # tick-locked references waiting for their tick
             self.exec_time = RingStats()
             self.cmd = ActuatorCommand()
             qos = stream_qos()
@@ -78,13 +80,21 @@ def make_node(params: dict):
                 f'speed clamp {p["plant.drive.omega_max"]:.0f} rad/s')
 
         def on_reference(self, msg):
+            """seq 0: apply now. seq k > 0: a tick-locked source (the sweep) -> apply when the
+            estimate of tick k is handled, so reference timing does not depend on DDS order."""
+            if msg.seq > 0 and msg.seq > self.last_seq:
+                self.pending.append((msg.seq, msg.position))
+                return
+            self.apply_reference(msg.position)
+
+        def apply_reference(self, position):
             clamped = self.c.get('clamped_references', 0)
-            if not self.ctl.request(msg.position):
+            if not self.ctl.request(position):
                 self.get_logger().warning('reference rejected (not finite); holding the last '
                                           'good one', throttle_duration_sec=1.0)
             elif self.c.get('clamped_references', 0) > clamped:
                 self.get_logger().warning(
-                    f'reference {msg.position * 1e3:.1f} mm is beyond the stroke: clamped to '
+                    f'reference {position * 1e3:.1f} mm is beyond the stroke: clamped to '
                     f'+-{self.ctl.ref.limit * 1e3:.1f} mm', throttle_duration_sec=1.0)
 
         def on_redundancy(self, msg):
@@ -99,6 +109,8 @@ def make_node(params: dict):
             t0 = time.perf_counter()
             now = time.monotonic()
             self.last_seq = msg.seq
+            while self.pending and self.pending[0][0] <= msg.seq:
+                self.apply_reference(self.pending.popleft()[1])
             fresh = not msg.stale and np.isfinite(msg.position)
             if not fresh:
                 self.c.bump('stale_estimates')

@@ -1,11 +1,147 @@
-"""estimator node (not built yet: issue 4)."""
+"""estimator node: Kalman position estimate (core.estimator.Estimator) on the ROS graph.
+
+Subscribes eha/state, publishes one eha/estimate per state with the same seq and header stamp
+(position, velocity, p_D, variance, innovation, NIS, sensor fault). The filter uses the active
+channel's motor speed. A NaN or out-of-range measurement gives a predict-only estimate with
+update_skipped = true; it is counted and reported on /diagnostics. A 1 ms timer watches the
+stream: no state for more than estimator.node.stale_time (5 ms) -> predict-only estimates
+marked stale = true, one per timer tick, with the seq the missing states would have had.
+"""
+from __future__ import annotations
+
 import sys
+import time
 
-from .common import not_implemented
+from ..core.estimator.estimator import Estimator
+from ..core.estimator.fault_detector import NAMES
+from ..core.estimator.params import SCHEMA
+from ..core.stats import Counters, RingStats
+from . import diag
+from .common import declare_and_validate, run, stream_qos
+
+STATE_QUEUE_DEPTH = 20      # states (20 ms at 1 kHz): rides out short stalls without a long backlog
 
 
-def main() -> int:
-    return not_implemented('estimator', 4)
+def make_node(params: dict):
+    from rclpy.node import Node
+    from eha_msgs.msg import ActuatorState, PositionEstimate
+
+    class EstimatorNode(Node):
+        def __init__(self):
+            super().__init__('estimator')
+            self.p = declare_and_validate(self, SCHEMA, params)
+            self.est = Estimator(self.p)
+            self.stale_time = self.p['estimator.node.stale_time']
+            self.c = Counters()
+            self.period = RingStats()
+            self.exec_time = RingStats()
+            self.last_arrival = None
+            self.last_seq = None
+            self.stale = False
+            self.stale_seq = 0
+            self.msg = PositionEstimate()
+            qos = stream_qos()
+            self.pub = self.create_publisher(PositionEstimate, 'eha/estimate', qos)
+            # a deeper input queue: after a scheduling stall the queued states are still
+            # answered (their provisional stale predictions are replaced), not dropped
+            in_qos = stream_qos()
+            in_qos.depth = STATE_QUEUE_DEPTH
+            self.pub_diag = diag.publisher(self)
+            self.create_subscription(ActuatorState, 'eha/state', self.on_state, in_qos)
+            self.create_timer(self.p['estimator.node.timer_period'], self.on_timer)
+            self.create_timer(self.p['estimator.node.diagnostics_period'],
+                              self.publish_diagnostics)
+            self.get_logger().info(
+                f'estimator: filter={self.p["estimator.filter"]}, '
+                f'measurements={self.p["estimator.measurements"]}, '
+                f'stale after {self.stale_time * 1e3:.1f} ms')
+
+        def on_state(self, msg):
+            t0 = time.perf_counter()
+            now = time.monotonic()
+            if self.last_arrival is not None:
+                self.period.add(now - self.last_arrival)
+            self.last_arrival = now
+            ticks = 1
+            if self.last_seq is not None:
+                if msg.seq > self.last_seq + 1:
+                    self.c.bump('lost_states', int(msg.seq - self.last_seq - 1))
+                    ticks = int(msg.seq - self.last_seq)
+                elif msg.seq <= self.last_seq:
+                    self.c.bump('out_of_order_states')
+            if self.stale:
+                self.stale = False
+                self.get_logger().info(f'states back at seq {msg.seq}',
+                                       throttle_duration_sec=1.0)
+            self.last_seq = msg.seq
+            r = self.est.update(msg.position, msg.motor_speed, msg.pressure_a, msg.pressure_b,
+                                msg.active_channel, ticks)
+            self.c.bump('estimates')
+            if r.rejected:
+                self.c.bump('rejected_states')
+                self.get_logger().warning(
+                    f'state seq {msg.seq}: rejected {r.rejected} '
+                    f'({"predict only" if r.update_skipped else "partial update"})',
+                    throttle_duration_sec=1.0)
+            self.publish(r, msg.header.stamp, msg.seq, False)
+            self.exec_time.add(time.perf_counter() - t0)
+
+        def on_timer(self):
+            if self.last_arrival is None:
+                return
+            if time.monotonic() - self.last_arrival <= self.stale_time:
+                return
+            if not self.stale:
+                self.stale = True
+                self.stale_seq = self.last_seq
+                self.c.bump('stale_events')
+                self.get_logger().warning(
+                    f'no state for {self.stale_time * 1e3:.1f} ms after seq {self.last_seq}: '
+                    f'publishing predict-only estimates marked stale',
+                    throttle_duration_sec=1.0)
+            self.stale_seq += 1
+            r = self.est.predict_only()
+            self.c.bump('stale_estimates')
+            self.publish(r, self.get_clock().now().to_msg(), self.stale_seq, True)
+
+        def publish(self, r, stamp, seq, stale):
+            m = self.msg
+            m.header.stamp = stamp
+            m.seq = int(seq)
+            m.position, m.velocity = r.position, r.velocity
+            m.pressure_diff, m.position_variance = r.pressure_diff, r.position_variance
+            m.innovation, m.nis = r.innovation, r.nis
+            m.stale, m.update_skipped = stale, r.update_skipped
+            m.sensor_fault = int(r.sensor_fault)
+            self.pub.publish(m)
+
+        def publish_diagnostics(self):
+            per, ex = self.period.summary(), self.exec_time.summary()
+            values = {'period_mean_s': per['mean'], 'period_p99_s': per['p99'],
+                      'period_max_s': per['max'], 'exec_mean_s': ex['mean'],
+                      'exec_p99_s': ex['p99'], 'exec_max_s': ex['max'], 'stale': self.stale,
+                      'last_seq': self.last_seq if self.last_seq is not None else -1,
+                      'sensor_fault': NAMES[self.est.detector.code],
+                      'position_variance_m2': self.est.kf.position_variance}
+            values.update(self.c)
+            values.update({f'estimator_{k}': v for k, v in self.est.counters.items()})
+            for code, n in self.est.detector.detections.items():
+                values[f'detections_{NAMES[code]}'] = n
+            if self.est.is_model and self.est.kf.i_leak is not None:
+                values['leak_correction_m3_per_s_pa'] = self.est.kf.leak_correction
+            alphas = self.est.friction_alphas
+            if alphas is not None:
+                values.update(alpha_1=alphas[0], alpha_2=alphas[1], alpha_3=alphas[2])
+            bad = self.stale or self.est.detector.code or self.c.get('rejected_states', 0)
+            level = diag.WARN if bad else diag.OK
+            msg = 'ok' if level == diag.OK else 'stale, sensor fault or measurements rejected'
+            diag.publish(self, self.pub_diag, f'filter {self.get_namespace()}', values, level, msg)
+
+    return EstimatorNode()
+
+
+def main(argv=None) -> int:
+    return run('estimator', SCHEMA, make_node, argv)
 
 
 if __name__ == '__main__':

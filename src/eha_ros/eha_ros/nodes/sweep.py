@@ -1,11 +1,161 @@
-"""sweep node (not built yet: issue 8)."""
+"""sweep node: stepped sine (TwinCAT Fr_Test semantics, appendix B.1), chirp or step on
+eha/reference, locked to the plant's ticks; records state, estimate, truth and command by seq,
+analyses each finished frequency (appendix B.2) and writes out/<run>/ as it goes.
+
+On each eha/state(k) it publishes the reference of tick k + lead_ticks stamped with that seq;
+the controller applies it when it handles tick k + lead_ticks, so the reference timing is exact
+in real time and lock-step alike. Ctrl-C mid-sweep keeps every finished frequency and marks
+the summary incomplete.
+"""
+from __future__ import annotations
+
+import os
 import sys
+import time
 
-from .common import not_implemented
+from ..core.params import default_config_dir, load
+from ..core.report import run_dir
+from ..core.sweep.params import SCHEMA, build_plan
+from ..core.sweep.session import SweepSession, print_table
+from . import diag
+from .common import declare_and_validate, run, stream_qos
+
+MARGIN_TICKS = 30           # data of a tick is complete this many ticks after its state
 
 
-def main() -> int:
-    return not_implemented('sweep', 8)
+def model_overlay(p: dict):
+    """Closed-loop model from the controller YAML, or None if it cannot be loaded."""
+    from ..core.controller.params import NODE as CONTROLLER
+    from ..core.sweep.model import closed_loop
+    path = p['sweep.controller_file'] or os.path.join(default_config_dir(), 'controller.yaml')
+    tf_keys = [q for q in CONTROLLER.params if q.name.endswith(('.num', '.den'))]
+    try:
+        c = load(type(CONTROLLER)('controller', tf_keys), [path])
+    except Exception:
+        return None, path
+    G = (c['position_controller.num'], c['position_controller.den'])
+    F = (c['prefilter.num'], c['prefilter.den'])
+    return (lambda f: closed_loop(p, G, F, f)), path
+
+
+def make_node(params: dict):
+    from rclpy.node import Node
+    from eha_msgs.msg import (ActuatorCommand, ActuatorState, PlantTruth, PositionEstimate,
+                              PositionReference)
+
+    plan = build_plan(params)          # one-line error for a bad sweep, before ROS starts
+
+    class Sweep(Node):
+        def __init__(self):
+            super().__init__('sweep')
+            self.p = p = declare_and_validate(self, SCHEMA, params)
+            self.plan = plan
+            self.lead = p['sweep.lead_ticks']
+            model, ctl_file = model_overlay(p)
+            self.out = run_dir(p['sweep.out_dir'], p['sweep.run_name'] or None)
+            meta = {'mode': p['sweep.mode'], 'amplitude_m': p['sweep.amplitude'],
+                    'offset_m': p['sweep.offset'], 'source': 'sweep node over DDS',
+                    'controller_file': ctl_file}
+            self.session = SweepSession(plan, self.out, meta, p['sweep.output'],
+                                        p['sweep.abort_error'], p['sweep.abort_ticks'], model,
+                                        settle_periods=p['sweep.settle_periods'])
+            self.ref_msg = PositionReference()
+            self.ready_since = None
+            self.commands_seen = 0
+            self.done = False
+            self.exit_code = 0
+            qos = stream_qos()
+            self.pub = self.create_publisher(PositionReference, 'eha/reference', qos)
+            self.pub_diag = diag.publisher(self)
+            self.create_subscription(ActuatorState, 'eha/state', self.on_state, qos)
+            self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
+            self.create_subscription(PlantTruth, 'eha/sim/truth', self.on_truth, qos)
+            self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
+            self.create_timer(1.0, self.publish_diagnostics)
+            self.get_logger().info(
+                f'sweep: {p["sweep.mode"]}, {plan.n_ticks * plan.Ts:.1f} s planned, writing '
+                f'{self.out}/')
+
+        def on_command(self, msg):
+            self.commands_seen += 1
+            self.session.record('command', msg.seq, msg.motor_speed_ref)
+
+        def on_truth(self, msg):
+            self.session.record('truth', msg.seq, msg.position)
+
+        def on_estimate(self, msg):
+            self.session.record('estimate', msg.seq, msg.position)
+            if self.session.check_error(msg.seq, msg.position):
+                self.get_logger().error(f'sweep {self.session.aborted}; reference back to the '
+                                        f'offset')
+                self.end()
+
+        def on_state(self, msg):
+            s = self.session
+            k = msg.seq
+            if s.seq0 is None:
+                if self.commands_seen == 0:
+                    return                         # wait for a controller to answer
+                now = time.monotonic()
+                self.ready_since = self.ready_since or now
+                if now - self.ready_since < self.p['sweep.start_delay']:
+                    self.send(k + self.lead, self.plan.offset)
+                    return
+                s.start(k + self.lead)
+                self.get_logger().info(f'sweep started at tick {k + self.lead}')
+            s.record('measured', k, msg.position)
+            s.record('motor_speed_0', k, msg.motor_speed[0])
+            s.record('motor_speed_1', k, msg.motor_speed[1])
+            s.record('active_channel', k, msg.active_channel)
+            s.record('reference', k, s.reference_for(k))
+            self.send(k + self.lead, s.reference_for(k + self.lead))
+            for point in s.progress(k - MARGIN_TICKS):
+                self.get_logger().info(f'{point.freq_hz:6.2f} Hz: {point.gain_db:7.2f} dB '
+                                       f'{point.phase_deg:7.1f} deg coherence '
+                                       f'{point.coherence:.4f}')
+            if not self.done and k - s.seq0 >= s.n + MARGIN_TICKS:
+                self.end()
+
+        def send(self, seq, position):
+            m = self.ref_msg
+            m.seq = int(seq)
+            m.position = float(position)
+            self.pub.publish(m)
+
+        def end(self, reason=None):
+            """Finish the report; reference back to the offset; exit if asked to."""
+            if self.session.finished:
+                return
+            self.send(0, self.plan.offset)
+            summary = self.session.finish(reason=reason)
+            print_table(summary, lambda line: self.get_logger().info(line))
+            self.get_logger().info(f'report: {self.out}/ (summary.json, data.csv, bode.png)')
+            if not summary['complete']:
+                self.exit_code = 1
+            if self.p['sweep.exit_when_done']:
+                self.done = True
+
+        def publish_diagnostics(self):
+            s = self.session
+            values = {'started': s.seq0 is not None, 'points': len(s.points),
+                      'planned_points': len(getattr(self.plan, 'segments', [])),
+                      'finished': s.finished, 'status': s.aborted or 'running',
+                      'out_dir': self.out}
+            diag.publish(self, self.pub_diag, 'sweep', values,
+                         diag.ERROR if s.aborted else diag.OK, s.aborted or 'ok')
+
+        def close(self):
+            """Ctrl-C: keep every finished frequency, mark the summary incomplete."""
+            if self.session.seq0 is not None and not self.session.finished:
+                self.end(reason='interrupted')
+            elif not self.session.finished:
+                self.session.finish(complete=False, reason='interrupted before the start')
+
+    return Sweep()
+
+
+def main(argv=None) -> int:
+    return run('sweep', SCHEMA, make_node, argv)
 
 
 if __name__ == '__main__':

@@ -1,46 +1,57 @@
-"""The main job (scripts/run): a stepped-sine sweep of the simulated actuator with a report.
+"""The main job (scripts/run): the simulated EHA stack with a stepped-sine sweep and a report.
 
-Today the stack runs in batch (plant core + position controller in one process). The
-position loop is the thesis' interim PID of Table 3.8 on the measured position until the
-estimator and the QFT controller nodes exist; the report says which controller was used.
+realtime (default): plant_sim, estimator, controller (and switch_manager) as separate
+processes over DDS at 1 kHz, the sweep node driving them; lockstep: the same with the plant
+stepping only when command(k) arrived; batch: the same core objects in one process.
+Every mode writes out/<run>/summary.json, data.csv, bode.png (and logs/ for the node modes).
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import signal
+import subprocess
 import sys
 import time
 
-import numpy as np
-
 from ..core.cli import UsageError, guarded
-from ..core.params import default_config_dir, load
-from ..core.report import bode_png, run_dir, write_csv, write_json
-from ..core.sweep.analysis import sine_point, summarize, unwrap_deg
-from ..core.sweep.signals import SteppedSine, check_sweep
+from ..core.params import default_config_dir
+from ..core.report import run_dir
 
-MODES = ('batch', 'realtime', 'lockstep')
+MODES = ('realtime', 'lockstep', 'batch')
 
 
 def parse(argv):
     ap = argparse.ArgumentParser(
         prog='scripts/run',
-        description='Run the simulated EHA with a stepped-sine sweep (thesis Fig. 4.51) and '
-                    'write a report (summary.json, data.csv, bode.png) under out/<run>/.')
-    ap.add_argument('--amplitude-mm', type=float, default=1.0, help='sine amplitude [mm] (1)')
-    ap.add_argument('--offset-mm', type=float, default=0.0, help='position offset [mm] (0)')
-    ap.add_argument('--start-hz', type=float, default=1.0, help='first frequency [Hz] (1)')
-    ap.add_argument('--step-hz', type=float, default=1.0, help='frequency increment [Hz] (1)')
-    ap.add_argument('--max-hz', type=float, default=15.0, help='last frequency [Hz] (15)')
-    ap.add_argument('--periods', type=int, default=8, help='periods per frequency (8)')
-    ap.add_argument('--relax-s', type=float, default=0.3, help='rest between frequencies [s]')
-    ap.add_argument('--mode', choices=MODES, default='batch',
-                    help='batch: one process, no DDS (available now); realtime/lockstep: the '
-                         'node stack over DDS (needs the estimator, controller and sweep nodes)')
+        description='Run the simulated EHA stack with a stepped-sine sweep (thesis Fig. 4.51) '
+                    'and write a report (summary.json, data.csv, bode.png) under out/<run>/. '
+                    'Sweep defaults come from config/sweep.yaml (1-15 Hz, 1 mm).')
+    ap.add_argument('--mode', choices=MODES, default='realtime',
+                    help='realtime: nodes over DDS at 1 kHz (default); lockstep: plant waits '
+                         'for each command; batch: core objects in one process, no DDS')
+    ap.add_argument('--amplitude-mm', type=float, help='sine amplitude [mm]')
+    ap.add_argument('--offset-mm', type=float, help='centre position [mm]')
+    ap.add_argument('--start-hz', type=float, help='first frequency [Hz]')
+    ap.add_argument('--step-hz', type=float, help='frequency increment [Hz]')
+    ap.add_argument('--max-hz', type=float, help='last frequency [Hz]')
+    ap.add_argument('--periods', type=int, help='whole periods per frequency')
     ap.add_argument('--config', default=default_config_dir(), help='config folder (config/)')
     ap.add_argument('--out', default='out', help='output base folder (out/)')
-    ap.add_argument('--seed', type=int, default=1, help='noise seed (1)')
+    ap.add_argument('--name', default=None, help='run folder name (default: timestamp)')
+    ap.add_argument('--timeout', type=float, default=600.0,
+                    help='give up (and keep what was measured) after this many seconds')
     return ap.parse_args(argv)
+
+
+def sweep_overrides(args) -> dict:
+    """Command-line options as sweep.* parameter values."""
+    pairs = {'sweep.amplitude': None if args.amplitude_mm is None else args.amplitude_mm * 1e-3,
+             'sweep.offset': None if args.offset_mm is None else args.offset_mm * 1e-3,
+             'sweep.start_hz': args.start_hz, 'sweep.increment_hz': args.step_hz,
+             'sweep.max_hz': args.max_hz, 'sweep.periods': args.periods}
+    return {k: v for k, v in pairs.items() if v is not None}
 
 
 def main(argv=None) -> int:
@@ -49,87 +60,122 @@ def main(argv=None) -> int:
 
 
 def run(args) -> int:
-    from ..core.pid import PID
-    from ..core.plant import EhaPlant
-    from ..core.plant.parameters import PLANT_SCHEMA
-    from ..core.plant import linear
+    from ..core.params import load
+    from ..core.sweep.params import SCHEMA, build_plan
+    over = sweep_overrides(args)
+    # validate the sweep here, so a bad option is one line before anything starts
+    sweep_p = load(SCHEMA, [os.path.join(args.config, f) for f in ('plant.yaml', 'sweep.yaml')],
+                   {f'sweep:{k}': v for k, v in over.items()}, node='sweep')
+    plan = build_plan(sweep_p)
+    out = run_dir(args.out, args.name)
+    print(f'run: {args.mode}, stepped sine {sweep_p["sweep.start_hz"]:g}-'
+          f'{sweep_p["sweep.max_hz"]:g} Hz every {sweep_p["sweep.increment_hz"]:g} Hz, '
+          f'{sweep_p["sweep.amplitude"] * 1e3:g} mm, {sweep_p["sweep.periods"]} periods '
+          f'({plan.n_ticks * plan.Ts:.0f} s of sweep); config {args.config}; report {out}/',
+          flush=True)
+    if args.mode == 'batch':
+        summary = run_batch(args, sweep_p, plan, out)
+    else:
+        summary = run_nodes(args, over, out)
+    from ..core.sweep.session import print_table
+    print()
+    print_table(summary)
+    print(f'report: {out}/ (summary.json, data.csv, bode.png'
+          f'{", logs/" if args.mode != "batch" else ""})')
+    return 0 if summary.get('complete') else 1
 
-    if args.mode != 'batch':
-        raise UsageError(f'mode {args.mode!r} needs the estimator, controller and sweep nodes, '
-                         f'which are not built yet (issues 4, 6, 8): use --mode batch')
-    plant_file = os.path.join(args.config, 'plant.yaml')
-    params = load(PLANT_SCHEMA, [plant_file])
-    Ts = params['plant.sim.Ts']
-    amp, off = args.amplitude_mm * 1e-3, args.offset_mm * 1e-3
-    check_sweep(args.start_hz, args.step_hz, args.max_hz, args.periods, args.relax_s, amp, off,
-                params['plant.cylinder.stroke'], Ts)
-    sweep = SteppedSine(args.start_hz, args.step_hz, args.max_hz, args.periods, args.relax_s,
-                        amp, off, Ts)
-    out = run_dir(args.out)
-    print(f'run: batch stepped sine {args.start_hz:g}-{args.max_hz:g} Hz step {args.step_hz:g} Hz, '
-          f'{args.amplitude_mm:g} mm, {args.periods} periods; plant {plant_file}; '
-          f'controller: thesis PID (Table 3.8, interim) on the measured position', flush=True)
 
-    plant = EhaPlant(params, seed=args.seed)
-    plant.reset(position=off)
-    pid = PID.table_3_8(Ts, omega_max=params['plant.drive.omega_max'])
-    n = sweep.n_ticks
-    rec = {k: np.zeros(n) for k in ('t', 'reference', 'measured', 'truth', 'command',
-                                    'motor_speed_0', 'motor_speed_1')}
-    ref = sweep.array()
+def run_batch(args, p, plan, out) -> dict:
+    """Batch: the same core objects in one process, tick by tick."""
+    from ..core.batch import BatchStack
+    from ..core.sweep.session import SweepSession
+    from ..nodes.sweep import model_overlay
+    stack = BatchStack(args.config)
+    model, ctl_file = model_overlay(p)
+    meta = {'mode': 'stepped', 'amplitude_m': p['sweep.amplitude'], 'offset_m': p['sweep.offset'],
+            'source': 'batch (plant, estimator, controller cores in one process)',
+            'controller_file': ctl_file}
+    session = SweepSession(plan, out, meta, p['sweep.output'], p['sweep.abort_error'],
+                           p['sweep.abort_ticks'], model, background_writes=False,
+                           settle_periods=p['sweep.settle_periods'])
+    warmup = int(round(0.5 / stack.Ts))
+    for _ in range(warmup):                      # let the estimator settle at the offset
+        stack.tick(plan.offset)
+    session.start(stack.k)
     t0 = time.perf_counter()
-    done_segments = 0
-    for k in range(n):
-        m = plant.measure()
-        u = pid.update(ref[k] - m.position)
-        plant.step(u, 0.0)
-        tr = plant.truth()
-        rec['t'][k] = (k + 1) * Ts
-        rec['reference'][k], rec['measured'][k], rec['truth'][k] = ref[k], m.position, tr.position
-        rec['command'][k] = u
-        rec['motor_speed_0'][k], rec['motor_speed_1'][k] = m.motor_speed
-        seg = sweep.segment_at(k)
-        if seg is not None and k == sweep.segments[seg].stop - 1:
-            done_segments += 1
-            print(f'  {sweep.segments[seg].freq_hz:5.1f} Hz done ({done_segments}/'
-                  f'{len(sweep.segments)})', flush=True)
+    try:
+        while stack.k - session.seq0 < plan.n_ticks:
+            k = stack.k
+            ref = session.reference_for(k)
+            r = stack.tick(ref)
+            for col in ('reference', 'measured', 'estimate', 'truth', 'command',
+                        'motor_speed_0', 'motor_speed_1', 'active_channel'):
+                session.record(col, k, getattr(r, col))
+            if session.check_error(k, r.estimate):
+                break
+            for pt in session.progress(k):
+                print(f'  {pt.freq_hz:6.2f} Hz: {pt.gain_db:7.2f} dB {pt.phase_deg:7.1f} deg '
+                      f'coherence {pt.coherence:.4f}', flush=True)
+    except KeyboardInterrupt:
+        return session.finish(reason='interrupted')
     wall = time.perf_counter() - t0
+    session.meta['wall_s'] = wall
+    session.meta['simulated_s'] = plan.n_ticks * plan.Ts
+    print(f'  {plan.n_ticks * plan.Ts:.1f} s simulated in {wall:.1f} s '
+          f'({plan.n_ticks * plan.Ts / wall:.1f}x real time)')
+    return session.finish()
 
-    points = []
-    for seg in sweep.segments:
-        sl = slice(seg.start, seg.stop)
-        points.append(sine_point(rec['reference'][sl], rec['truth'][sl], seg.freq_hz, Ts))
-    summary = summarize(points)
-    summary.update({'complete': True, 'mode': 'batch', 'output': 'true position',
-                    'controller': 'thesis PID, Table 3.8 (interim until the QFT controller)',
-                    'amplitude_m': amp, 'offset_m': off, 'simulated_s': n * Ts,
-                    'wall_s': wall, 'plant_config': plant_file})
-    write_csv(os.path.join(out, 'data.csv'), rec)
-    write_json(os.path.join(out, 'summary.json'), summary)
 
-    # linear-model overlay: PID (continuous equivalent, with the one-tick delay) around eq. 3.41
-    f = np.logspace(np.log10(args.start_hz * 0.8), np.log10(args.max_hz * 1.2), 200)
-    w = 2 * np.pi * f
-    P = linear.freqresp(linear.velocity_abcd(params), w)
-    s = 1j * w
-    C = pid.kp + pid.ki / s + pid.kd * s / (pid.tau_d * s + 1)
-    L = C * P * np.exp(-s * Ts)
-    T = L / (1 + L)
-    bode_png(os.path.join(out, 'bode.png'), summary['points'],
-             (f, 20 * np.log10(np.abs(T)), unwrap_deg(np.degrees(np.angle(T)))),
-             'closed loop x/x_ref: batch plant + Table 3.8 PID')
-
-    print(f'\n{"freq [Hz]":>10} {"gain [dB]":>10} {"phase [deg]":>12} {"coherence":>10}')
-    for p in summary['points']:
-        print(f'{p["freq_hz"]:10.2f} {p["gain_db"]:10.2f} {p["phase_deg"]:12.1f} '
-              f'{p["coherence"]:10.4f}')
-    bw = summary['bandwidth_hz']
-    ph7 = summary['phase_at_7hz_deg']
-    print(f'\nbandwidth (-3 dB): {"> %g Hz (not reached)" % args.max_hz if bw is None else "%.2f Hz" % bw}'
-          f'; phase at 7 Hz: {"n/a" if ph7 is None else "%.1f deg" % ph7}'
-          f'; {n * Ts:.1f} s simulated in {wall:.1f} s wall ({n * Ts / wall:.1f}x real time)')
-    print(f'report: {out}/ (summary.json, data.csv, bode.png)')
-    return 0
+def run_nodes(args, over: dict, out: str) -> dict:
+    """Realtime / lockstep: every node its own process, the sweep node drives the run."""
+    from ..stack import Stack, node_command
+    nodes = ['plant_sim', 'estimator', 'controller']
+    if os.path.exists(os.path.join(args.config, 'switch_manager.yaml')):
+        nodes.append('switch_manager')
+    extra = {}
+    if args.mode == 'lockstep':
+        extra['plant_sim'] = ['-p', 'plant_sim:sim_node.lockstep:=true']
+    logs = os.path.join(out, 'logs')
+    stack = Stack(nodes, args.config, extra, log_dir=logs).start()
+    print(f'run: started {", ".join(nodes)} (logs in {logs}/)', flush=True)
+    sweep_args = ['-p', f'sweep:sweep.out_dir:={os.path.dirname(out) or "."}',
+                  '-p', f'sweep:sweep.run_name:={os.path.basename(out)}']
+    for k, v in over.items():
+        sweep_args += ['-p', f'sweep:{k}:={v}']
+    sweep = subprocess.Popen(node_command('sweep', args.config, sweep_args), env=stack.env,
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             start_new_session=True)
+    lines = []
+    try:
+        deadline = time.monotonic() + args.timeout
+        for line in sweep.stdout:
+            lines.append(line)
+            text = line.split(']: ', 1)[-1].rstrip()
+            if 'Hz:' in text or 'started' in text or 'aborted' in text:
+                print('  ' + text, flush=True)
+            dead = stack.dead()
+            if dead:
+                raise UsageError(f'node(s) died during the run: {dead}; see {logs}/')
+            if time.monotonic() > deadline:
+                print(f'run: timeout after {args.timeout:.0f} s: stopping the sweep', flush=True)
+                os.killpg(sweep.pid, signal.SIGINT)
+        sweep.wait(timeout=60)
+    except KeyboardInterrupt:
+        print('run: interrupted: keeping every finished frequency', flush=True)
+        os.killpg(sweep.pid, signal.SIGINT)
+        sweep.wait(timeout=60)
+    finally:
+        if sweep.poll() is None:
+            os.killpg(sweep.pid, signal.SIGKILL)
+        with open(os.path.join(logs, 'sweep.log'), 'w') as fh:
+            fh.writelines(lines)
+        stack.stop()
+    path = os.path.join(out, 'summary.json')
+    if not os.path.exists(path):
+        raise UsageError(f'the sweep wrote no summary; see {logs}/sweep.log: '
+                         f'{"".join(lines[-3:]).strip()[-300:]}')
+    with open(path) as fh:
+        return json.load(fh)
 
 
 if __name__ == '__main__':

@@ -12,6 +12,8 @@ Corrections (DESIGN.md "Known inconsistencies", plant brief):
   F_L input enters as +F_L/m_p (a force along +x, eq. 4.36); in 3.41 (and the nonlinear
   plant) F_L enters as -F_L/m_p (eq. 3.23/3.32).
 Linear constants: b = mu (1120 N s/m), C_eq = C_p + C_c + C_r/2, b_eq from appendix D.1.
+The p_D leakage term is 2 beta C_eq / V_d as eq. 3.22 derives (and the nonlinear plant
+follows); the matrices of eqs. 3.24 and 4.35 print beta C_eq / V_d, inconsistent with 3.22.
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ def _mech_hydro_rows(p: PlantParams, A: np.ndarray, i_w=1, i_x=2, i_v=3, i_p=4):
     A[i_v, i_p] = p.A_p / p.m_p
     A[i_p, i_w] = 2 * p.beta * p.D_p / p.V_d
     A[i_p, i_v] = -2 * p.beta * p.A_p / p.V_d
-    A[i_p, i_p] = -p.beta * p.C_eq / p.V_d
+    A[i_p, i_p] = -2 * p.beta * p.C_eq / p.V_d       # eq. 3.22 (3.24 prints beta C_eq/V_d)
 
 
 def voltage_abcd(params, with_load: bool = False):
@@ -125,7 +127,7 @@ def hydromech_abcd(params):
     A = np.array([
         [0.0, 1.0, 0.0],
         [0.0, -p.b / p.m_p, p.A_p / p.m_p],
-        [0.0, -2 * p.A_p * p.beta / p.V_d, -p.C_eq * p.beta / p.V_d]])
+        [0.0, -2 * p.A_p * p.beta / p.V_d, -2 * p.C_eq * p.beta / p.V_d]])   # eq. 3.22
     B = np.array([[0.0, 0.0], [0.0, 1.0 / p.m_p], [2 * p.D_p * p.beta / p.V_d, 0.0]])
     C = np.array([[1.0, 0.0, 0.0]])
     return A, B, C, np.zeros((1, 2))

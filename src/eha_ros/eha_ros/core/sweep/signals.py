@@ -133,22 +133,27 @@ class Step:
 def check_sweep(start_hz, increment_hz, max_hz, periods, relax_s, amplitude, offset, stroke, Ts,
                 margin=0.005, settle_periods=2):
     """Refuse sweeps that cannot be measured or would hit the end stops: one-line UsageError."""
-    nyq = 0.5 / Ts
     if not all(math.isfinite(v) for v in (start_hz, increment_hz, max_hz, relax_s, amplitude, offset)):
         raise UsageError('sweep parameters must be finite numbers')
-    if start_hz <= 0 or max_hz < start_hz:
-        raise UsageError(f'frequencies: start {start_hz} Hz, max {max_hz} Hz: expected '
-                         f'0 < start <= max')
-    if increment_hz <= 0:
-        raise UsageError(f'increment {increment_hz} Hz: expected > 0')
-    if max_hz > nyq / 10:
-        raise UsageError(f'max frequency {max_hz} Hz is above Nyquist/10 = {nyq / 10:g} Hz at '
-                         f'Ts = {Ts:g} s: expected at most {nyq / 10:g} Hz')
     if periods <= settle_periods:
         raise UsageError(f'periods {periods}: expected more than the {settle_periods} settling '
                          f'periods (and not negative)')
     if relax_s < 0:
         raise UsageError(f'relax time {relax_s} s: expected >= 0')
+    if start_hz <= 0 or max_hz < start_hz:
+        raise UsageError(f'frequencies: start {start_hz} Hz, max {max_hz} Hz: expected '
+                         f'0 < start <= max')
+    if increment_hz <= 0:
+        raise UsageError(f'increment {increment_hz} Hz: expected > 0')
+    check_limits(max_hz, amplitude, offset, stroke, Ts, margin)
+
+
+def check_limits(max_hz, amplitude, offset, stroke, Ts, margin=0.005):
+    """Highest frequency below Nyquist/10, amplitude + offset inside the stroke minus a margin."""
+    nyq = 0.5 / Ts
+    if max_hz > nyq / 10:
+        raise UsageError(f'max frequency {max_hz} Hz is above Nyquist/10 = {nyq / 10:g} Hz at '
+                         f'Ts = {Ts:g} s: expected at most {nyq / 10:g} Hz')
     if amplitude <= 0:
         raise UsageError(f'amplitude {amplitude} m: expected > 0')
     reach = abs(offset) + amplitude

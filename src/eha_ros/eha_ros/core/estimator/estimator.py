@@ -1,0 +1,223 @@
+"""The position estimator the node wraps: one :meth:`Estimator.update` per measured state.
+
+Per tick: validate the measurement (finite, position within stroke +- margin, pressures in
+the sensor range, motor speed in range), predict one Ts with the active channel's motor speed
+(eq. 4.1-4.2; mean of the previous and current sample held over the period), update with the
+valid measurements (eq. 4.4-4.6, Joseph form), run the fault detector on the innovation.
+A rejected position means predict only (``update_skipped``); rejected pressures fall back to
+a position-only update; a rejected motor speed holds the last good one. Each rejection is
+counted in ``counters`` by reason.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..plant.parameters import PlantParams
+from ..stats import Counters
+from . import fault_detector as fd
+from . import kernels
+from .model_kf import HydroMech, ModelKF
+from .pva import PvaKF
+
+
+@dataclass
+class EstimateResult:
+    """One estimate (SI units); fields as eha_msgs/PositionEstimate."""
+
+    position: float
+    velocity: float
+    pressure_diff: float
+    position_variance: float
+    innovation: float
+    nis: float
+    update_skipped: bool
+    sensor_fault: int
+    rejected: str = ''             # reasons, comma separated ('' when all was used)
+    nis_dim: int = 0               # measurement dimension behind nis (0: no update)
+
+
+def hydromech(pp: PlantParams, leakage: str) -> HydroMech:
+    """Constants of eq. 4.35 with the p_D leakage choice (estimator.model.pd_leakage):
+    eq4_35 = C_eq beta/V_d as printed; eq3_22 = 2 C_eq beta/V_d as derived in eq. 3.22;
+    boost = 2 (C_p + C_c + C_r) beta/V_d: the boost check valves hold the low-pressure chamber
+    at the accumulator pressure, so both pump ports' external leakage C_r is drawn from the
+    high-pressure side (the plant at constant speed shows 5.2e-12 vs C_eq = 3.8e-12)."""
+    if leakage == 'boost':
+        return HydroMech(pp.A_p, pp.m_p, pp.b, pp.beta, pp.V_d, pp.C_p + pp.C_c + pp.C_r,
+                         pp.D_p, 2.0)
+    return HydroMech(pp.A_p, pp.m_p, pp.b, pp.beta, pp.V_d, pp.C_eq, pp.D_p,
+                     2.0 if leakage == 'eq3_22' else 1.0)
+
+
+def build_filter(p: dict):
+    """The configured filter (model KF of eq. 4.35 or PVA of eq. 4.30-4.34) from parameters."""
+    pp = PlantParams.from_dict(p)
+    e = 'estimator.'
+    if p[e + 'filter'] == 'pva':
+        return PvaKF(pp.Ts, p[e + 'pva.W'], p[e + 'pva.R'], p[e + 'pva.p0'])
+    h = hydromech(pp, p[e + 'model.pd_leakage'])
+    sig, gm_sig = p[e + 'noise.position_sigma'], p[e + 'noise.position_gm_sigma']
+    gm = (gm_sig, p[e + 'noise.position_gm_corner']) if p[e + 'model.sensor_gm'] else None
+    R_pos = sig ** 2 if gm else sig ** 2 + gm_sig ** 2
+    R_pd = 2.0 * p[e + 'noise.pressure_sigma'] ** 2 \
+        if p[e + 'measurements'] == 'position_pressure' else None
+    kf = ModelKF(h, pp.Ts, p[e + 'model.q'], p[e + 'model.p0'], R_pos, R_pd, gm,
+                 F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
+                 q_leak=p[e + 'model.q_leak'] if p[e + 'model.leak_state'] else None,
+                 p0_leak=p[e + 'model.p0_leak'])
+    kf.friction_uses_pressure = p[e + 'model.friction_pressure']
+    return kf
+
+
+class Estimator:
+    """Position estimator of the SIL stack: ``Estimator(params)`` with the estimator schema's
+    values (core.estimator.params.SCHEMA)."""
+
+    def __init__(self, params: dict):
+        kernels.warm_up()
+        self.p = params
+        pp = PlantParams.from_dict(params)
+        e = 'estimator.'
+        self.Ts = pp.Ts
+        self.kf = build_filter(params)
+        self.is_model = isinstance(self.kf, ModelKF)
+        self.use_pressure = self.is_model and self.kf.with_pressure
+        self.x_max = 0.5 * pp.stroke + params[e + 'validity.position_margin']
+        self.p_min = params[e + 'validity.pressure_min']
+        self.p_max = params[e + 'validity.pressure_max']
+        self.w_max = params[e + 'validity.max_abs_motor_speed']
+        self.isolate = params[e + 'fault.isolate']
+        self.alpha_pd = 1.0 - math.exp(-2.0 * math.pi * params[e + 'model.pressure_lowpass']
+                                       * self.Ts)
+        self.detector = fd.FaultDetector.from_params(params, self.Ts)
+        self.chinniah = None
+        if params[e + 'chinniah.enabled']:
+            from .chinniah import Chinniah3, Chinniah4
+            self.chinniah = (Chinniah3(pp.m_p, pp.A_p, self.Ts), Chinniah4(pp.m_p, pp.A_p, self.Ts))
+        self.counters = Counters()
+        self.max_gap_ticks = 1000       # a longer gap is predicted over at most 1 s
+        self.reset()
+
+    def reset(self):
+        self.started = False
+        self._saved = None
+        self.omega_prev = 0.0
+        self.pd_meas = 0.0          # last good measured p_D
+        self.pd_filt = 0.0          # its low-pass (model input)
+        self.detector.reset()
+        self.updates = 0
+
+    # ------------------------------------------------------------------ checks
+    def _position_ok(self, x) -> bool:
+        return isinstance(x, (int, float)) and math.isfinite(x) and abs(x) <= self.x_max
+
+    def _pressure_ok(self, pa, pb) -> bool:
+        return all(math.isfinite(v) and self.p_min <= v <= self.p_max for v in (pa, pb))
+
+    def _speed(self, motor_speed, active_channel):
+        """Active channel's speed if valid, else the last good one (counted)."""
+        ch = int(active_channel) if active_channel in (0, 1) else -1
+        if ch < 0:
+            self.counters.bump('rejected_channel')
+            return self.omega_prev, 'channel'
+        w = float(motor_speed[ch])
+        if not (math.isfinite(w) and abs(w) <= self.w_max):
+            self.counters.bump('rejected_motor_speed')
+            return self.omega_prev, 'motor_speed'
+        return w, ''
+
+    # ------------------------------------------------------------------ tick
+    def update(self, position: float, motor_speed, pressure_a: float, pressure_b: float,
+               active_channel: int, ticks: int = 1) -> EstimateResult:
+        """One measured state -> one estimate. ``ticks``: periods Ts since the previous state
+        (more than 1 after lost states; the missing ones are predicted with the held speed).
+        Predict-only (stale) steps taken since the previous state are provisional: they are
+        undone here and replaced by exactly ``ticks`` predictions."""
+        if self._saved is not None:
+            self.kf.x[:], self.kf.P[:], self.omega_prev = self._saved
+            self._saved = None
+        position = float(position)
+        pressure_a, pressure_b = float(pressure_a), float(pressure_b)
+        w, why_w = self._speed(motor_speed, active_channel)
+        pos_ok = self._position_ok(position)
+        pr_ok = self._pressure_ok(pressure_a, pressure_b)
+        reasons = [r for r in (why_w, '' if pos_ok else 'position',
+                               '' if pr_ok or not self.use_pressure else 'pressure') if r]
+        if not pos_ok:
+            self.counters.bump('rejected_position')
+        if not pr_ok and self.use_pressure:
+            self.counters.bump('rejected_pressure')
+        if pr_ok:
+            self.pd_meas = pressure_a - pressure_b
+        if not self.started:
+            if not pos_ok:
+                self.counters.bump('skipped_updates')
+                return self._result(0.0, 0.0, True, ','.join(reasons), 0)
+            self.kf.reset(position, self.pd_meas if pr_ok else 0.0)
+            self.pd_filt = self.pd_meas
+            self.omega_prev = w
+            self.started = True
+            self.detector.z_prev = position
+            return self._result(0.0, 0.0, False, ','.join(reasons), 0)
+        for _ in range(min(max(int(ticks), 1), self.max_gap_ticks) - 1):
+            self._predict(self.omega_prev)
+        self._predict(w)
+        if pr_ok:
+            self.pd_filt += self.alpha_pd * (self.pd_meas - self.pd_filt)
+        fault_before = self.detector.code
+        if not pos_ok:
+            self.detector.tick_without_sample()
+            self.counters.bump('skipped_updates')
+            return self._result(0.0, 0.0, True, ','.join(reasons), 0)
+        if self.isolate and fault_before != fd.NONE:
+            # sensor reported faulty: predict only, but keep watching its innovation
+            self.counters.bump('skipped_updates')
+            self.counters.bump('isolated_updates')
+            reasons.append('sensor_fault')
+            y, S = self.kf.innovation_only(position)
+            self.detector.update(position, y, S)
+            return self._result(y, y * y / S, True, ','.join(reasons), 0)
+        pd_z = self.pd_meas if (pr_ok and self.use_pressure) else None
+        y, S, nis, m = self.kf.update(position, pd_z)
+        self.updates += 1
+        self.detector.update(position, y, S)
+        if self.chinniah is not None and pr_ok:
+            self._chinniah_step(position)
+        return self._result(y, nis, False, ','.join(reasons), m)
+
+    def predict_only(self) -> EstimateResult:
+        """A tick without a state (stale): predict with the last good speed (provisional,
+        see :meth:`update`)."""
+        if self.started:
+            if self._saved is None:
+                self._saved = (self.kf.x.copy(), self.kf.P.copy(), self.omega_prev)
+            self._predict(self.omega_prev)
+        self.detector.tick_without_sample()
+        return self._result(0.0, 0.0, True, 'stale', 0)
+
+    def _predict(self, w: float):
+        omega = 0.5 * (self.omega_prev + w)
+        self.omega_prev = w
+        if self.is_model:
+            self.kf.predict(omega, self.pd_filt if self.use_pressure else None)
+        else:
+            self.kf.predict()
+
+    def _chinniah_step(self, position: float):
+        c3, c4 = self.chinniah
+        c3.step(position, self.kf.velocity, self.pd_meas, c4.alpha1, c4.alpha2)
+        c4.step(position, self.kf.velocity, self.pd_meas, c3.alpha3)
+
+    def _result(self, innovation, nis, skipped, rejected, m) -> EstimateResult:
+        kf = self.kf
+        pd = kf.pressure_diff if self.is_model else self.pd_meas
+        return EstimateResult(kf.position, kf.velocity, pd, kf.position_variance, innovation,
+                              nis, skipped, self.detector.code, rejected, m)
+
+    @property
+    def friction_alphas(self):
+        """(alpha_1, alpha_2, alpha_3) of the Chinniah pair, or None when disabled."""
+        if self.chinniah is None:
+            return None
+        return self.chinniah[1].alpha1, self.chinniah[1].alpha2, self.chinniah[0].alpha3

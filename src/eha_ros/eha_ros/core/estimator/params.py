@@ -1,0 +1,89 @@
+"""Parameters of the estimator (node and batch): estimator.* below plus the plant.* set of
+config/plant.yaml (the model of eq. 4.35 is built from the same plant parameters)."""
+from __future__ import annotations
+
+from ..params import Param, Schema
+from ..plant.parameters import PLANT_SCHEMA
+
+BAR = 1.0e5
+E = 'estimator.'
+
+ESTIMATOR = Schema('estimator', [
+    Param(E + 'filter', 'str', '', 'model', choices=('model', 'pva'),
+          doc='model = eq. 4.35 model-based KF; pva = position-velocity-acceleration KF '
+              '(eqs. 4.30-4.34)'),
+    Param(E + 'measurements', 'str', '', 'position_pressure',
+          choices=('position', 'position_pressure'),
+          doc='model KF measurement set: position, or position and p_D = p_A - p_B'),
+    # model of eq. 4.35
+    Param(E + 'model.pd_leakage', 'str', '', 'eq3_22', choices=('boost', 'eq3_22', 'eq4_35'),
+          doc='p_D leakage: boost = 2 (C_p+C_c+C_r) beta/V_d, eq3_22 = 2 C_eq beta/V_d, '
+              'eq4_35 = C_eq beta/V_d'),
+    Param(E + 'model.F_s', 'float', 'N', 800.0, 0.0, 1.0e5,
+          doc='friction bound of eq. 4.36'),
+    Param(E + 'model.v_eps', 'float', 'm/s', 3.0e-3, 1.0e-6, 0.1,
+          doc='pump-flow velocity over which eq. 4.36 friction reaches full sign'),
+    Param(E + 'model.friction_pressure', 'bool', '', False,
+          doc='use the measured p_D in min(|p_D A_p|, F_s) of eq. 4.36 (adds pressure noise)'),
+    Param(E + 'model.pressure_lowpass', 'float', 'Hz', 30.0, 0.1, 500.0,
+          doc='low-pass of the measured p_D used as a model input (friction, leakage column)'),
+    Param(E + 'model.sensor_gm', 'bool', '', True,
+          doc='add the position sensor Gauss-Markov offset as a state (coloured noise)'),
+    Param(E + 'model.leak_state', 'bool', '', True,
+          doc='add a leakage-coefficient correction state (1e-12 m^3/(s Pa) units)'),
+    Param(E + 'model.q', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-16, 1e-10, 1e6], 0.0, 1e20,
+          min_len=3, doc='per-step process noise variances of x, xdot, p_D'),
+    Param(E + 'model.p0', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-8, 1e-4, 1e10], 0.0, 1e20,
+          min_len=3, doc='initial variances of x, xdot, p_D'),
+    Param(E + 'model.q_leak', 'float', '(1e-12 m^3/(s Pa))^2', 1e-8, 0.0, 1e6,
+          doc='per-step random-walk variance of the leakage correction'),
+    Param(E + 'model.p0_leak', 'float', '(1e-12 m^3/(s Pa))^2', 4.0, 0.0, 1e6),
+    # sensor noise model (the filter's R)
+    Param(E + 'noise.position_sigma', 'float', 'm', 1.0e-5, 1e-9, 1e-2,
+          doc='white position noise sigma (R of the position)'),
+    Param(E + 'noise.position_gm_sigma', 'float', 'm', 2.0e-5, 0.0, 1e-2,
+          doc='low-frequency (Gauss-Markov) position noise sigma, Fig. 4.6'),
+    Param(E + 'noise.position_gm_corner', 'float', 'Hz', 1.0, 1e-3, 100.0),
+    Param(E + 'noise.pressure_sigma', 'float', 'Pa', 0.316 * BAR, 1.0, 1e7,
+          doc='one pressure sensor sigma; p_D gets twice its variance'),
+    # PVA filter, eq. 4.30-4.34
+    Param(E + 'pva.W', 'float', 'm^2/s^5', 100.0, 1e-12, 1e12,
+          doc='jerk noise intensity W, eq. 4.32'),
+    Param(E + 'pva.R', 'float', 'm^2', 5.0e-10, 1e-16, 1.0,
+          doc='position noise variance, eq. 4.33'),
+    Param(E + 'pva.p0', 'float[]', 'm^2, (m/s)^2, (m/s^2)^2', [1e-6, 1e-2, 1e2], 0.0, 1e20,
+          min_len=3, doc='initial variances, eq. 4.34'),
+    # measurement validity
+    Param(E + 'validity.position_margin', 'float', 'm', 5.0e-3, 0.0, 0.1,
+          doc='accepted position: within +-(stroke/2 + margin)'),
+    Param(E + 'validity.pressure_min', 'float', 'Pa', 0.0, -1e6, 1e7),
+    Param(E + 'validity.pressure_max', 'float', 'Pa', 400.0 * BAR, 1e5, 1e9),
+    Param(E + 'validity.max_abs_motor_speed', 'float', 'rad/s', 1257.0, 1.0, 1e5,
+          doc='motor speeds beyond this are rejected (last good speed held)'),
+    # position-sensor fault detector
+    Param(E + 'fault.jump_threshold', 'float', '', 8.0, 1.0, 1e6,
+          doc='|innovation| / sqrt(S) above this counts towards a jump'),
+    Param(E + 'fault.jump_debounce', 'int', 'samples', 3, 1, 10000),
+    Param(E + 'fault.stuck_samples', 'int', 'samples', 25, 2, 1000000,
+          doc='identical consecutive readings of the noisy sensor that mean stuck'),
+    Param(E + 'fault.stuck_tolerance', 'float', 'm', 0.0, 0.0, 1e-3,
+          doc='readings closer than this count as identical'),
+    Param(E + 'fault.drift_k', 'float', '', 0.5, 0.0, 100.0,
+          doc='CUSUM allowance on the normalised innovation'),
+    Param(E + 'fault.drift_h', 'float', '', 150.0, 1.0, 1e9, doc='CUSUM alarm level'),
+    Param(E + 'fault.drift_debounce', 'int', 'samples', 5, 1, 10000),
+    Param(E + 'fault.hold_time', 'float', 's', 0.5, 0.0, 100.0,
+          doc='a detected fault stays reported this long after its condition clears'),
+    Param(E + 'fault.isolate', 'bool', '', False,
+          doc='skip the position update while a sensor fault is reported'),
+    # Chinniah friction estimator (sec. 4.1.2) on the running estimate
+    Param(E + 'chinniah.enabled', 'bool', '', False,
+          doc='run the 3-state/4-state friction estimators (eqs. 4.15-4.29) on the estimate'),
+    # node
+    Param(E + 'node.stale_time', 'float', 's', 0.005, 1e-4, 10.0,
+          doc='no state for longer than this: publish predict-only estimates marked stale'),
+    Param(E + 'node.timer_period', 'float', 's', 0.001, 1e-4, 1.0),
+    Param(E + 'node.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+])
+
+SCHEMA = Schema('estimator', list(PLANT_SCHEMA.params) + list(ESTIMATOR.params))

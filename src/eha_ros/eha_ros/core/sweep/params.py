@@ -1,0 +1,58 @@
+"""Parameters of the sweep node (sweep.*) plus the shared plant.* set."""
+from __future__ import annotations
+
+from ..params import Param, Schema
+from ..plant.parameters import PLANT_SCHEMA
+
+NODE = Schema('sweep', [
+    Param('sweep.mode', 'str', '', 'stepped', choices=('stepped', 'chirp', 'step')),
+    Param('sweep.amplitude', 'float', 'm', 1e-3, 1e-6, 0.12, doc='sine/chirp amplitude or step size'),
+    Param('sweep.offset', 'float', 'm', 0.0, -0.12, 0.12, doc='position the signal is centred on'),
+    Param('sweep.start_hz', 'float', 'Hz', 1.0, 0.01, 1000.0, doc='Fr_Test starting_freq'),
+    Param('sweep.increment_hz', 'float', 'Hz', 1.0, 1e-3, 1000.0, doc='Fr_Test freq_increment'),
+    Param('sweep.max_hz', 'float', 'Hz', 15.0, 0.01, 1000.0, doc='Fr_Test max_freq'),
+    Param('sweep.periods', 'int', '', 8, -1000, 10000, doc='Fr_Test period_count'),
+    Param('sweep.settle_periods', 'int', '', 2, 0, 100, doc='periods skipped by the analysis'),
+    Param('sweep.relax_s', 'float', 's', 0.3, -100.0, 60.0, doc='Fr_Test freq_interval (rest)'),
+    Param('sweep.chirp_f0', 'float', 'Hz', 0.5, 0.01, 1000.0),
+    Param('sweep.chirp_f1', 'float', 'Hz', 20.0, 0.01, 1000.0),
+    Param('sweep.chirp_duration', 'float', 's', 30.0, 0.1, 3600.0),
+    Param('sweep.chirp_fade', 'float', 's', 0.5, 0.0, 60.0),
+    Param('sweep.step_duration', 'float', 's', 2.0, 0.05, 3600.0),
+    Param('sweep.lead_ticks', 'int', '', 2, 1, 100,
+          doc='references are sent this many ticks ahead, stamped with their tick'),
+    Param('sweep.start_delay', 'float', 's', 1.0, 0.0, 600.0,
+          doc='wait this long after state and command streams are up'),
+    Param('sweep.abort_error', 'float', 'm', 0.005, 1e-5, 0.12,
+          doc='abort when |reference - estimate| stays above this'),
+    Param('sweep.abort_ticks', 'int', '', 20, 1, 100000),
+    Param('sweep.output', 'str', '', 'auto', choices=('auto', 'truth', 'estimate', 'measured'),
+          doc='signal analysed against the reference (auto: truth when present)'),
+    Param('sweep.out_dir', 'str', '', 'out', doc='runs are written under out_dir/<run>/'),
+    Param('sweep.run_name', 'str', '', '', doc='folder name; empty = timestamp'),
+    Param('sweep.controller_file', 'str', '', '',
+          doc='controller YAML for the model overlay; empty = config/controller.yaml'),
+    Param('sweep.exit_when_done', 'bool', '', True),
+])
+
+SCHEMA = PLANT_SCHEMA + NODE
+
+
+def build_plan(p: dict):
+    """The signal plan from validated parameters; one-line UsageError for unusable values."""
+    from .signals import Chirp, Step, SteppedSine, check_sweep, check_limits
+    Ts = p['plant.sim.Ts']
+    stroke = p['plant.cylinder.stroke']
+    if p['sweep.mode'] == 'stepped':
+        check_sweep(p['sweep.start_hz'], p['sweep.increment_hz'], p['sweep.max_hz'],
+                    p['sweep.periods'], p['sweep.relax_s'], p['sweep.amplitude'],
+                    p['sweep.offset'], stroke, Ts, settle_periods=p['sweep.settle_periods'])
+        return SteppedSine(p['sweep.start_hz'], p['sweep.increment_hz'], p['sweep.max_hz'],
+                           p['sweep.periods'], p['sweep.relax_s'], p['sweep.amplitude'],
+                           p['sweep.offset'], Ts)
+    if p['sweep.mode'] == 'chirp':
+        check_limits(p['sweep.chirp_f1'], p['sweep.amplitude'], p['sweep.offset'], stroke, Ts)
+        return Chirp(p['sweep.chirp_f0'], p['sweep.chirp_f1'], p['sweep.chirp_duration'],
+                     p['sweep.amplitude'], p['sweep.offset'], p['sweep.chirp_fade'], Ts)
+    check_limits(0.0, p['sweep.amplitude'], p['sweep.offset'], stroke, Ts)
+    return Step(p['sweep.amplitude'], p['sweep.step_duration'], 0.1, p['sweep.offset'], Ts)

@@ -1,0 +1,201 @@
+"""One sweep run against a stream of plant ticks: reference per tick, recording by seq, gain and
+phase per finished frequency, and outputs under out/<run>/ that survive an interruption.
+
+Used by the sweep node (ticks from /eha/state) and by batch runs (ticks from a loop), so both
+produce the same summary.json (contract: bandwidth_hz, phase_at_7hz_deg, points[]).
+"""
+from __future__ import annotations
+
+import math
+import os
+import queue
+import threading
+
+import numpy as np
+
+from ..report import bode_png, write_csv, write_json
+from .analysis import sine_point, summarize
+
+COLUMNS = ('reference', 'estimate', 'measured', 'truth', 'command', 'motor_speed_0',
+           'motor_speed_1', 'active_channel')
+
+
+class Writer:
+    """Runs file writes on a background thread so 1 kHz callbacks never wait for the disk."""
+
+    def __init__(self, background: bool = True):
+        self.background = background
+        self.q: queue.Queue = queue.Queue()
+        self.thread = None
+        if background:
+            self.thread = threading.Thread(target=self._run, name='sweep_writer', daemon=True)
+            self.thread.start()
+
+    def submit(self, fn, *args):
+        if self.background:
+            self.q.put((fn, args))
+        else:
+            fn(*args)
+
+    def _run(self):
+        while True:
+            item = self.q.get()
+            if item is None:
+                return
+            fn, args = item
+            try:
+                fn(*args)
+            except Exception as err:          # keep writing what can be written
+                print(f'sweep: writing failed: {err!r}', flush=True)
+
+    def close(self):
+        if self.thread is not None:
+            self.q.put(None)
+            self.thread.join(timeout=30)
+
+
+class SweepSession:
+    """Stepped-sine (or chirp/step) plan + recording + incremental report."""
+
+    def __init__(self, plan, out_dir: str, meta: dict, output: str = 'auto',
+                 abort_error: float = math.inf, abort_ticks: int = 20, model=None,
+                 background_writes: bool = True, settle_periods: int = 2):
+        self.plan = plan
+        self.n = plan.n_ticks
+        self.Ts = plan.Ts
+        self.out = out_dir
+        os.makedirs(os.path.join(out_dir, 'data'), exist_ok=True)
+        self.meta = dict(meta)
+        self.output = output
+        self.abort_error = abort_error
+        self.abort_ticks = abort_ticks
+        self.model = model                     # callable freqs_hz -> (gain_db, phase_deg)
+        self.settle = settle_periods
+        self.ref = plan.array()
+        self.data = {c: np.full(self.n, np.nan) for c in COLUMNS}
+        self.seq0 = None
+        self.points = []
+        self.next_segment = 0
+        self.error_count = 0
+        self.aborted = None
+        self.finished = False
+        self.writer = Writer(background_writes)
+        self._write_summary(complete=False, reason='running')
+
+    # ---- ticks ----
+    def start(self, seq0: int):
+        """The plan's tick 0 is plant tick seq0."""
+        self.seq0 = seq0
+
+    def reference_for(self, seq: int) -> float:
+        """Reference for plant tick seq (offset outside the plan)."""
+        i = seq - self.seq0
+        return float(self.ref[i]) if 0 <= i < self.n else float(self.plan.offset)
+
+    def record(self, column: str, seq: int, value: float):
+        if self.seq0 is None:
+            return
+        i = seq - self.seq0
+        if 0 <= i < self.n:
+            self.data[column][i] = value
+
+    def check_error(self, seq: int, position: float) -> bool:
+        """Abort when |reference - position| exceeds the limit for abort_ticks ticks in a row."""
+        if self.aborted or self.seq0 is None:
+            return False
+        err = abs(self.reference_for(seq) - position)
+        self.error_count = self.error_count + 1 if err > self.abort_error else 0
+        if self.error_count >= self.abort_ticks:
+            self.aborted = (f'aborted: position error {err * 1e3:.2f} mm > '
+                            f'{self.abort_error * 1e3:.2f} mm at tick {seq - self.seq0}')
+            return True
+        return False
+
+    def progress(self, done_seq: int) -> list:
+        """Analyse every segment whose data is complete up to done_seq; returns new points."""
+        new = []
+        segs = getattr(self.plan, 'segments', [])
+        while self.next_segment < len(segs) and self.seq0 is not None and \
+                done_seq - self.seq0 >= segs[self.next_segment].stop:
+            seg = segs[self.next_segment]
+            point = self._analyse(seg)
+            if point is not None:
+                self.points.append(point)
+                new.append(point)
+            self.writer.submit(self._write_segment, self.next_segment, seg)
+            self.next_segment += 1
+            self._write_summary(complete=False, reason='running')
+        return new
+
+    def output_column(self, sl=slice(None)) -> str:
+        if self.output != 'auto':
+            return self.output
+        return 'truth' if np.isfinite(self.data['truth'][sl]).mean() > 0.9 else 'estimate'
+
+    def _analyse(self, seg):
+        sl = slice(seg.start, seg.stop)
+        col = self.output_column(sl)
+        u, y = self.ref[sl], self.data[col][sl]
+        ok = np.isfinite(y)
+        if ok.mean() < 0.95:
+            return None                            # too much missing: no point, not a wrong one
+        if not ok.all():
+            idx = np.arange(len(y))
+            y = np.interp(idx, idx[ok], y[ok])
+        return sine_point(u, y, seg.freq_hz, self.Ts, self.settle)
+
+    # ---- outputs ----
+    def _write_segment(self, i, seg):
+        sl = slice(seg.relax_start, seg.stop)
+        cols = {'tick': np.arange(sl.start, sl.stop), **{c: self.data[c][sl] for c in COLUMNS}}
+        write_csv(os.path.join(self.out, 'data', f'segment_{i:02d}_{seg.freq_hz:g}hz.csv'), cols)
+
+    def _summary(self, complete: bool, reason: str) -> dict:
+        s = summarize(self.points)
+        s.update({'complete': complete, 'status': reason, 'output': self.output_column(),
+                  'frequencies_planned_hz': [seg.freq_hz for seg in getattr(self.plan, 'segments', [])]})
+        s.update(self.meta)
+        return s
+
+    def _write_summary(self, complete: bool, reason: str):
+        summary = self._summary(complete, reason)
+        self.writer.submit(write_json, os.path.join(self.out, 'summary.json'), summary)
+        return summary
+
+    def finish(self, complete: bool | None = None, reason: str | None = None) -> dict:
+        """Final summary, full data CSV and Bode plot; complete only if every point was analysed."""
+        if self.finished:
+            return self._summary(self.complete, self.reason)
+        segs = getattr(self.plan, 'segments', [])
+        if complete is None:
+            complete = self.aborted is None and len(self.points) == len(segs)
+        reason = reason or self.aborted or ('complete' if complete else 'interrupted')
+        self.complete, self.reason = complete, reason
+        summary = self._write_summary(complete, reason)
+        cols = {'tick': np.arange(self.n), **self.data}
+        self.writer.submit(write_csv, os.path.join(self.out, 'data.csv'), cols)
+        if self.points:
+            model = None
+            if self.model is not None:
+                f = np.logspace(np.log10(min(p.freq_hz for p in self.points) * 0.8),
+                                np.log10(max(p.freq_hz for p in self.points) * 1.2), 200)
+                model = (f, *self.model(f))
+            title = f'closed loop x/x_ref ({summary["output"]}), {"complete" if complete else reason}'
+            self.writer.submit(bode_png, os.path.join(self.out, 'bode.png'), summary['points'],
+                               model, title)
+        self.writer.close()
+        self.finished = True
+        return summary
+
+
+def print_table(summary: dict, out=print):
+    """The summary table scripts/run prints."""
+    out(f'{"freq [Hz]":>10} {"gain [dB]":>10} {"phase [deg]":>12} {"coherence":>10}')
+    for p in summary['points']:
+        out(f'{p["freq_hz"]:10.2f} {p["gain_db"]:10.2f} {p["phase_deg"]:12.1f} '
+            f'{p["coherence"]:10.4f}')
+    bw, ph7 = summary['bandwidth_hz'], summary['phase_at_7hz_deg']
+    top = max((p['freq_hz'] for p in summary['points']), default=0)
+    out(f'bandwidth (-3 dB): {"above %g Hz (not reached)" % top if bw is None else "%.2f Hz" % bw}'
+        f'; phase at 7 Hz: {"n/a" if ph7 is None else "%.1f deg" % ph7}'
+        f'; {"complete" if summary["complete"] else "INCOMPLETE: " + summary["status"]}')

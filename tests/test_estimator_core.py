@@ -1,0 +1,296 @@
+"""Estimator core (no DDS): ZOH of eq. 4.35, Joseph form vs filterpy, PVA filter, NIS
+statistics, measurement rejection, stale prediction, Chinniah friction estimators, parameters."""
+import math
+import os
+
+import numpy as np
+import pytest
+
+from eha_ros.core.params import ParamError, load
+from eha_ros.core.estimator import batch, kernels
+from eha_ros.core.estimator.chinniah import (ALPHA_TABLE_4_1, Chinniah3, ChinniahEstimator,
+                                             ChinniahJoint, simulate_rig)
+from eha_ros.core.estimator.estimator import Estimator
+from eha_ros.core.estimator.model_kf import HydroMech, continuous, friction_estimate, zoh
+from eha_ros.core.estimator.params import SCHEMA
+from eha_ros.core.estimator.pva import PvaKF, pva_matrices
+from eha_ros.core.plant.linear import hydromech_abcd
+from eha_ros.core.plant.parameters import PlantParams
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG = [os.path.join(ROOT, 'config', 'plant.yaml'),
+          os.path.join(ROOT, 'config', 'estimator.yaml')]
+
+
+@pytest.fixture(scope='module')
+def params():
+    return load(SCHEMA, CONFIG)
+
+
+def hydro(params, leak_factor=2.0):
+    pp = PlantParams.from_dict(params)
+    return HydroMech(pp.A_p, pp.m_p, pp.b, pp.beta, pp.V_d, pp.C_eq, pp.D_p, leak_factor)
+
+
+# ---------------------------------------------------------------- model and discretisation
+def test_continuous_model_is_eq_4_35_corrected_as_in_plant_linear(params):
+    A, B = continuous(hydro(params, leak_factor=2.0))       # eq. 3.22 leakage: 2 C_eq beta/V_d
+    A_ref, B_ref, _, _ = hydromech_abcd(params)              # (4.35 prints C_eq beta/V_d)
+    assert np.allclose(A, A_ref, rtol=1e-12) and np.allclose(B, B_ref, rtol=1e-12)
+    assert A[1, 2] > 0, 'row 2 must be +A_p/m_p p_D (printed sign makes a saddle)'
+    assert np.all(np.linalg.eigvals(A)[np.abs(np.linalg.eigvals(A)) > 1e-9].real < 0)
+    A1, _ = continuous(hydro(params, 1.0))
+    assert math.isclose(A[2, 2], 2 * A1[2, 2])               # the printed 4.35 term is half
+
+
+def test_zoh_matches_integrated_response(params):
+    A, B = continuous(hydro(params))
+    Ts = 1e-3
+    F, G = zoh(A, B, Ts)
+    # integrate x' = A x + B u with a fine RK4 over one period, constant u
+    x0 = np.array([1e-3, 0.01, 2e5])
+    u = np.array([50.0, -300.0])
+    x, h = x0.copy(), Ts / 20000
+    f = lambda x: A @ x + B @ u
+    for _ in range(20000):
+        k1 = f(x); k2 = f(x + h / 2 * k1); k3 = f(x + h / 2 * k2); k4 = f(x + h * k3)
+        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    assert np.allclose(F @ x0 + G @ u, x, rtol=1e-6, atol=1e-12)
+    # the printed 4.41 has F[1,1] = -0.987; a ZOH of 4.35 with Table 3.8 has not
+    assert F[1, 1] != pytest.approx(-0.987, abs=0.01)
+
+
+def test_friction_estimate_eq_4_36_opposes_motion_and_is_continuous(params):
+    pp = PlantParams.from_dict(params)
+    args = (pp.A_p, pp.D_p, 800.0, 3e-3)
+    w_fast = 5e-3 * pp.A_p / pp.D_p * 10            # pump flow well above v_eps
+    assert friction_estimate(w_fast, 1e6, *args) == -800.0          # min(|p_D A_p|, F_s)
+    assert friction_estimate(-w_fast, -1e6, *args) == 800.0
+    assert friction_estimate(w_fast, 1e5, *args) == pytest.approx(-1e5 * pp.A_p)
+    assert friction_estimate(w_fast, None, *args) == -800.0
+    assert friction_estimate(0.0, 2e5, *args) == pytest.approx(-2e5 * pp.A_p)  # sticking
+    ws = np.linspace(-2 * w_fast / 10, 2 * w_fast / 10, 2001)
+    fl = np.array([friction_estimate(w, 2e5, *args) for w in ws])
+    assert np.max(np.abs(np.diff(fl))) < 10.0, 'friction estimate jumps'
+
+
+# ---------------------------------------------------------------- Joseph form vs filterpy
+@pytest.mark.parametrize('measurements', ['position', 'position_pressure'])
+def test_filter_matches_filterpy_joseph_form(params, measurements):
+    from filterpy.kalman import KalmanFilter
+    p = dict(params)
+    p['estimator.measurements'] = measurements
+    est = Estimator(p)
+    kf = est.kf
+    f = KalmanFilter(dim_x=kf.n, dim_z=kf.H.shape[0], dim_u=2)
+    f.F, f.B, f.Q, f.H, f.R = kf.F, kf.G, kf.Q, kf.H, kf.R
+    f.P, f.x = kf.P.copy(), kf.x.copy()
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        w, pd = rng.normal() * 100, rng.normal() * 3e5
+        kf.predict(w, pd)                 # sets F's leakage column and u
+        f.F = kf.F.copy()
+        f.P = f.P  # same prior as ours before the step
+        f.predict(u=kf.u.copy())
+        z = np.array([rng.normal() * 1e-4, pd + rng.normal() * 4e4])[:kf.H.shape[0]]
+        y, S, nis, m = kf.update(z[0], z[1] if m_is_2(kf) else None)
+        f.update(z)
+        assert nis == pytest.approx(float(f.y @ np.linalg.solve(f.S, f.y)), rel=1e-9)
+    assert np.allclose(kf.x, f.x, rtol=1e-9, atol=1e-15)
+    assert np.allclose(kf.P, f.P, rtol=1e-8, atol=1e-12 * np.abs(f.P).max())
+    assert np.allclose(kf.P, kf.P.T) and np.all(np.linalg.eigvalsh(kf.P) > -1e-20)
+
+
+def m_is_2(kf):
+    return kf.H.shape[0] == 2
+
+
+def test_joseph_update_keeps_covariance_positive_with_bad_gain_arithmetic():
+    """Eq. 4.6 vs 4.7: with a near-singular prior the simple form loses symmetry/positivity."""
+    x = np.zeros(2)
+    P = np.array([[1e6, 1e6 - 1e-3], [1e6 - 1e-3, 1e6]])
+    H, R = np.array([[1.0, 0.0]]), np.array([[1e-12]])
+    y, S = np.zeros(1), np.zeros((1, 1))
+    kernels.update(x, P, H, R, np.array([1.0]), y, S)
+    assert np.allclose(P, P.T)
+    assert np.all(np.linalg.eigvalsh(P) >= -1e-9 * np.abs(P).max())
+
+
+# ---------------------------------------------------------------- PVA
+def test_pva_matrices_eq_4_30_4_32():
+    F, Q = pva_matrices(1e-3, 100.0)
+    assert F[0, 2] == pytest.approx(0.5e-6) and F[1, 2] == 1e-3
+    assert Q[0, 0] == pytest.approx(100 / 20 * 1e-15) and Q[2, 2] == pytest.approx(0.1)
+    assert np.allclose(Q, Q.T) and np.all(np.linalg.eigvalsh(Q) > 0)
+
+
+def test_pva_tracks_constant_acceleration_and_reduces_white_noise():
+    rng = np.random.default_rng(0)
+    kf = PvaKF(1e-3, 1.0, 1e-10)
+    t = np.arange(4000) * 1e-3
+    x = 0.01 * t + 0.5 * 0.02 * t ** 2
+    z = x + 1e-5 * rng.standard_normal(t.size)
+    est = []
+    for k, zk in enumerate(z):
+        if k:
+            kf.predict()
+        kf.update(zk)
+        est.append(kf.position)
+    est = np.array(est)
+    err = est[2000:] - x[2000:]
+    assert abs(err.mean()) < 1e-6                       # no steady-state lag on a parabola
+    assert np.sqrt(np.mean(err ** 2)) < 0.6 * 1e-5      # white noise reduced
+    print(f'PVA velocity {kf.velocity:.5f} m/s (true {0.01 + 0.02 * t[-1]:.5f})')
+    assert kf.velocity == pytest.approx(0.01 + 0.02 * t[-1], abs=2e-3)
+    assert kf.acceleration == pytest.approx(0.02, abs=0.02)
+
+
+def test_pva_option_runs_in_the_estimator(params):
+    p = dict(params)
+    p['estimator.filter'] = 'pva'
+    run = batch.closed_loop(p, batch.sine(1e-3, 2.0), 2.0, seed=2)
+    s = run.t > 0.5
+    err = np.sqrt(np.mean((run.estimate[s] - run.truth[s]) ** 2))
+    raw = np.sqrt(np.mean((run.measured[s] - run.truth[s]) ** 2))
+    print(f'PVA: estimate RMSE {err * 1e6:.1f} um, raw {raw * 1e6:.1f} um')
+    assert err < raw
+    assert not run.skipped[1:].any() and np.all(run.nis_dim[1:] == 1)
+
+
+# ---------------------------------------------------------------- NIS statistics
+@pytest.mark.parametrize('measurements,dim', [('position', 1), ('position_pressure', 2)])
+def test_mean_nis_matches_measurement_dimension_under_nominal_noise(params, measurements, dim):
+    """Actuator holding position with the default sensor noise: E[NIS] = dim (chi-square)."""
+    p = dict(params)
+    p['estimator.measurements'] = measurements
+    run = batch.closed_loop(p, lambda t: 0.0 * t, 6.0, seed=4)
+    s = (run.t > 1.0) & (run.nis_dim > 0)
+    assert np.all(run.nis_dim[s] == dim)
+    mean = run.nis[s].mean()
+    print(f'{measurements}: mean NIS {mean:.3f} (dim {dim}) over {s.sum()} updates')
+    # 5000 correlated samples: +-10 % around the dimension
+    assert abs(mean - dim) < 0.1 * dim
+    # and the chi-square tail: 99.9 % quantile (10.8 for 1, 13.8 for 2 dof) rarely exceeded
+    q = {1: 10.83, 2: 13.82}[dim]
+    assert np.mean(run.nis[s] > q) < 0.005
+
+
+def test_mean_nis_in_motion_position_only(params):
+    p = dict(params)
+    p['estimator.measurements'] = 'position'
+    run = batch.closed_loop(p, batch.sine(5e-3, 1.0), 6.0, seed=5)
+    s = (run.t > 1.0) & (run.nis_dim > 0)
+    mean = run.nis[s].mean()
+    print(f'position-only, 1 Hz 5 mm sine: mean NIS {mean:.3f}')
+    assert abs(mean - 1.0) < 0.15
+
+
+# ---------------------------------------------------------------- rejection and stale
+def test_nan_and_out_of_range_position_predict_only_and_counted(params):
+    est = Estimator(params)
+    w = np.array([10.0, 0.0])
+    r = est.update(0.0, w, 1e6, 1e6, 0)
+    for _ in range(50):
+        r = est.update(1e-5, w, 1e6, 1e6, 0)
+    assert not r.update_skipped and r.nis_dim == 2
+    x_before = r.position
+    for bad in (float('nan'), float('inf'), 0.2, -0.07):
+        r = est.update(bad, w, 1e6, 1e6, 0)
+        assert r.update_skipped and r.nis_dim == 0 and 'position' in r.rejected
+        assert math.isfinite(r.position)
+    assert est.counters['rejected_position'] == 4
+    assert est.counters['skipped_updates'] == 4
+    assert r.position != x_before          # predicted with the pump speed meanwhile
+    r = est.update(1e-5, w, 1e6, 1e6, 0)
+    assert not r.update_skipped
+
+
+def test_bad_pressure_falls_back_to_position_update(params):
+    est = Estimator(params)
+    w = np.array([0.0, 0.0])
+    est.update(0.0, w, 1e6, 1e6, 0)
+    r = est.update(0.0, w, float('nan'), 1e6, 0)
+    assert not r.update_skipped and r.nis_dim == 1 and r.rejected == 'pressure'
+    r = est.update(0.0, w, 1e6, 5e7, 0)              # above the 400 bar sensor range
+    assert r.rejected == 'pressure'
+    assert est.counters['rejected_pressure'] == 2
+
+
+def test_bad_motor_speed_or_channel_holds_last_good_speed(params):
+    est = Estimator(params)
+    est.update(0.0, [100.0, 0.0], 1e6, 1e6, 0)
+    r = est.update(0.0, [float('nan'), 0.0], 1e6, 1e6, 0)
+    assert r.rejected == 'motor_speed' and not r.update_skipped
+    r = est.update(0.0, [100.0, 0.0], 1e6, 1e6, 7)
+    assert r.rejected == 'channel'
+    assert est.omega_prev == 100.0
+    r = est.update(0.0, [0.0, 55.0], 1e6, 1e6, 1)      # the active channel's speed is used
+    assert est.omega_prev == 55.0
+
+
+def test_stale_predictions_are_provisional(params):
+    """Predict-only steps while states are missing are replaced when the next state arrives
+    by exactly the number of ticks it says have passed."""
+    a, b = Estimator(params), Estimator(params)
+    rng = np.random.default_rng(1)
+    for k in range(300):
+        z = 1e-5 * rng.standard_normal()
+        a.update(z, [80.0, 0.0], 1.2e6, 1.0e6, 0)
+        b.update(z, [80.0, 0.0], 1.2e6, 1.0e6, 0)
+    for _ in range(7):                     # states stop: 7 stale estimates
+        r = a.predict_only()
+        assert r.update_skipped
+    ra = a.update(2e-5, [80.0, 0.0], 1.2e6, 1.0e6, 0, ticks=3)
+    rb = b.update(2e-5, [80.0, 0.0], 1.2e6, 1.0e6, 0, ticks=3)
+    assert ra.position == rb.position and np.allclose(a.kf.P, b.kf.P)
+
+
+# ---------------------------------------------------------------- Chinniah (sec. 4.1.2)
+def test_chinniah_alpha3_within_10_percent_after_2s_of_4hz_3mm_sine():
+    """Simulated data with known friction (Table 4.1), 4 Hz 3 mm sine, thesis noise
+    (position 1e-10 m^2, velocity 0.01 (m/s)^2, pressure 0.316 bar)."""
+    a3_true = ALPHA_TABLE_4_1[2]
+    d = simulate_rig(2.0, amplitude=3e-3, freq=4.0, dp_sigma=31600.0, seed=1)
+    joint = ChinniahJoint()
+    pair = ChinniahEstimator()
+    for k in range(d.t.size):
+        joint.step(d.z_pos[k], d.z_vel[k], d.dP[k])
+        pair.step(d.z_pos[k], d.z_vel[k], d.dP[k])
+    a1, a2, a3 = joint.alphas
+    print(f'joint: alpha = {a1:.0f}, {a2:.0f}, {a3:.2f} (true {ALPHA_TABLE_4_1}); '
+          f'3-state/4-state pair: {pair.alphas}')
+    assert abs(a3 - a3_true) <= 0.10 * a3_true
+    assert abs(a1 - ALPHA_TABLE_4_1[0]) <= 0.2 * ALPHA_TABLE_4_1[0]
+    assert abs(a2 - ALPHA_TABLE_4_1[1]) <= 0.2 * abs(ALPHA_TABLE_4_1[1])
+    # the thesis' pair converges to the right friction level, less precisely
+    assert abs(pair.alphas[2] - a3_true) <= 0.25 * a3_true
+
+
+def test_chinniah_3state_alone_finds_coulomb_friction():
+    """With only Coulomb friction (alpha_1 = alpha_2 = 0) the 3-state filter of eq. 4.15-4.22
+    is the exact model and converges to alpha_3."""
+    d = simulate_rig(2.0, alphas=(0.0, 0.0, 46.0), seed=2)
+    f = Chinniah3(20.0, 5.05e-4, 1e-4)
+    for k in range(d.t.size):
+        f.step(d.z_pos[k], d.z_vel[k], d.dP[k])
+    assert f.alpha3 == pytest.approx(46.0, rel=0.05)
+
+
+# ---------------------------------------------------------------- parameters
+def test_estimator_schema_registered_and_defaults_match_yaml(params):
+    from eha_ros.core.schemas import schema_for
+    assert schema_for('estimator') is SCHEMA
+    assert load(SCHEMA, [CONFIG[0]]) == params     # YAML repeats the schema defaults
+
+
+@pytest.mark.parametrize('key,value,needle', [
+    ('estimator.filter', 'ekf', 'one of model|pva'),
+    ('estimator.model.F_s', -1.0, 'estimator.model.F_s'),
+    ('estimator.node.stale_time', 'fast', 'estimator.node.stale_time'),
+    ('estimator.model.q', [1e-16], 'estimator.model.q'),
+])
+def test_bad_parameter_is_one_line(key, value, needle):
+    with pytest.raises(ParamError) as err:
+        load(SCHEMA, CONFIG, {'estimator:' + key: value})    # -p estimator:key:=value
+    text = str(err.value)
+    assert needle in text and '\n' not in text

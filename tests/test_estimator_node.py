@@ -1,0 +1,205 @@
+"""estimator node as a separate process over DDS: one estimate per state with the same seq and
+stamp, NaN measurement -> predict only, counted and reported, stale when the states stop,
+bad parameters -> one line and exit 2."""
+import math
+import os
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from ros_util import ROOT, VENV_BIN, start_process, stop_process, wait_for
+
+pytestmark = pytest.mark.ros
+PLANT = [os.path.join(ROOT, 'config', 'plant.yaml')]
+EST = PLANT + [os.path.join(ROOT, 'config', 'estimator.yaml')]
+SIM = PLANT + [os.path.join(ROOT, 'config', 'plant_sim.yaml')]
+
+
+def cmd(name, files, *extra):
+    args = [os.path.join(VENV_BIN, name), '--ros-args']
+    for f in files:
+        args += ['--params-file', f]
+    return args + list(extra)
+
+
+class Probe:
+    def __init__(self, node, ns=''):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from eha_msgs.msg import ActuatorState, PositionEstimate
+        from rclpy.qos import QoSProfile
+        qos = QoSProfile(depth=2000)
+        self.lock = threading.Lock()
+        self.states, self.estimates, self.diags = {}, [], []
+        node.create_subscription(ActuatorState, f'{ns}/eha/state', self._on_state, qos)
+        node.create_subscription(PositionEstimate, f'{ns}/eha/estimate', self._on_est, qos)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
+        self.ns = ns or '/'
+        self.state_pub = node.create_publisher(ActuatorState, f'{ns}/eha/state', qos)
+        self.State = ActuatorState
+
+    def _on_state(self, msg):
+        with self.lock:
+            self.states[msg.seq] = msg
+
+    def _on_est(self, msg):
+        with self.lock:
+            self.estimates.append((time.monotonic(), msg))
+
+    def _on_diag(self, msg):
+        for st in msg.status:
+            if st.name == f'estimator: filter {self.ns}':
+                self.diags.append({kv.key: kv.value for kv in st.values})
+
+    def clear(self):
+        with self.lock:
+            self.states.clear()
+            self.estimates.clear()
+
+
+@pytest.fixture(scope='module')
+def stack():
+    est = start_process(cmd('estimator', EST))
+    plant = start_process(cmd('plant_sim', SIM))
+    procs = {'estimator': est, 'plant_sim': plant}
+    yield procs
+    for name, p in procs.items():
+        code, out, err = stop_process(p)
+        assert 'Traceback' not in err, f'{name}: {err}'
+
+
+def test_bad_params_file_one_line_exit_2(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('estimator:\n  ros__parameters:\n    estimator:\n      filter: ekf\n')
+    res = subprocess.run(cmd('estimator', PLANT + [str(bad)]), capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'estimator.filter' in lines[0] and 'model|pva' in lines[0], \
+        res.stderr
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('estimator:\n  ros__parameters: [\n')
+    res = subprocess.run(cmd('estimator', [str(broken)]), capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert 'Traceback' not in res.stderr
+
+
+def test_nan_measurement_predict_only_counted_and_reported(ros_node):
+    """A crafted state stream to an estimator alone on /est_test; a few NaN positions."""
+    proc = start_process(cmd('estimator', EST, '-r', '__ns:=/est_test', '-p',
+                             'estimator:estimator.node.diagnostics_period:=0.2'))
+    try:
+        probe = Probe(ros_node, '/est_test')
+        nan_seqs = set()
+        stop = threading.Event()
+        th = None
+        seq_now = [1]
+        rng = np.random.default_rng(0)
+
+        def publish():
+            while not stop.is_set():
+                seq = seq_now[0]
+                m = probe.State()
+                m.header.stamp = ros_node.get_clock().now().to_msg()
+                m.seq = seq
+                # a noisy sensor (a noise-free constant would rightly be reported stuck)
+                m.position = float('nan') if seq in nan_seqs else 1e-3 + 1e-5 * rng.normal()
+                m.motor_speed = [0.0, 0.0]
+                m.pressure_a = m.pressure_b = 1.0e6
+                m.active_channel = 0
+                m.valid = True
+                probe.state_pub.publish(m)
+                seq_now[0] = seq + 1
+                time.sleep(0.001)
+
+        th = threading.Thread(target=publish, daemon=True)
+        th.start()
+        # stream good states until the estimator answers (discovery), then inject NaN
+        assert wait_for(lambda: len(probe.estimates) > 200, 60), \
+            'no estimates from the estimator on /est_test'
+        first = seq_now[0] + 100
+        nan_seqs.update(range(first, first + 5))
+        nan_seqs.add(first + 50)
+        assert wait_for(lambda: any(e.seq > first + 300 for _, e in list(probe.estimates)), 30)
+        stop.set()
+        th.join()
+        th = None
+        by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
+        answered = [s for s in nan_seqs if s in by_seq]
+        # on a heavily loaded machine the estimator may miss a state (then counted as lost)
+        assert len(answered) >= 4, f'estimates for only {len(answered)} of 6 NaN states'
+        for s in answered:
+            e = by_seq[s]
+            assert e.update_skipped and math.isfinite(e.position)
+            assert abs(e.position - 1e-3) < 1e-4
+        assert wait_for(lambda: any(int(d.get('estimator_rejected_position', 0)) >= len(answered)
+                                    for d in list(probe.diags)), 10), str(probe.diags[-1:])
+        good = [by_seq[s] for s in range(first + 100, first + 200) if s in by_seq]
+        assert good and not any(e.update_skipped for e in good)
+        d = probe.diags[-1]
+        assert int(d['estimator_skipped_updates']) >= len(answered)
+        assert int(d['rejected_states']) >= len(answered)
+    finally:
+        stop.set()
+        if th is not None:
+            th.join()
+        code, out, err = stop_process(proc)
+    assert 'Traceback' not in err, err
+    assert 'rejected position' in err
+
+
+def test_one_estimate_per_state_same_seq_and_stamp(stack, ros_node):
+    probe = Probe(ros_node)
+    assert wait_for(lambda: len(probe.estimates) > 200, 60), 'no /eha/estimate'
+    time.sleep(0.5)
+    probe.clear()
+    time.sleep(3.0)
+    with probe.lock:
+        states = dict(probe.states)
+        ests = [e for _, e in probe.estimates]
+    fresh = [e for e in ests if not e.stale]
+    by_seq = {}
+    for e in fresh:
+        by_seq.setdefault(e.seq, []).append(e)
+    assert all(len(v) == 1 for v in by_seq.values()), 'more than one estimate for a seq'
+    common = [s for s in states if s in by_seq]
+    missing = [s for s in states if s not in by_seq]
+    lo, hi = min(states) + 20, max(states) - 20          # edges of the window
+    inner_missing = [s for s in missing if lo <= s <= hi]
+    print(f'{len(states)} states, {len(fresh)} estimates, {len(inner_missing)} without estimate, '
+          f'{len(ests) - len(fresh)} stale')
+    # The node publishes exactly one estimate per state it receives. Seen from this test
+    # process, on an overloaded machine some states or estimates are missed by either side
+    # (plant_sim may also run slower than 1 kHz), so coverage is checked loosely here; the
+    # node's own count of states it never got is lost_states on /diagnostics.
+    assert len(states) > 300 and len(common) >= 0.5 * len(states)
+    seqs = [e.seq for e in fresh]
+    assert all(b > a for a, b in zip(seqs, seqs[1:])), 'estimates out of order'
+    for s in common[::50]:
+        assert by_seq[s][0].header.stamp == states[s].header.stamp
+    pos = np.array([by_seq[s][0].position for s in common])
+    meas = np.array([states[s].position for s in common])
+    assert np.all(np.abs(pos - meas) < 1e-3)                 # tracks the measured piston
+    assert all(e.position_variance > 0 and e.nis >= 0 for e in fresh)
+
+
+def test_stale_marked_when_plant_stops(stack, ros_node):
+    probe = Probe(ros_node)
+    assert wait_for(lambda: len(probe.estimates) > 100, 30)
+    code, out, err = stop_process(stack['plant_sim'])
+    assert 'Traceback' not in err
+    t_stop = time.monotonic()
+    time.sleep(1.0)
+    with probe.lock:
+        after = [(t, e) for t, e in probe.estimates if t > t_stop + 0.1]
+        last_state = max(probe.states) if probe.states else 0
+    # one per 1 ms timer tick (fewer when the machine is overloaded)
+    print(f'{len(after)} stale estimates in 0.9 s after the plant stopped')
+    assert len(after) > 50, 'estimator stopped publishing when the states stopped'
+    assert all(e.stale and e.update_skipped for _, e in after)
+    assert all(e.seq > last_state for _, e in after)
+    assert all(math.isfinite(e.position) for _, e in after)
+    assert stack['estimator'].poll() is None

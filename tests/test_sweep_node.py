@@ -1,0 +1,69 @@
+"""The sweep node over DDS with the full simulated stack: bandwidth and coherence; Ctrl-C keeps
+the finished frequencies; bad parameters stop the node with one line."""
+import json
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+
+from eha_ros.stack import Stack, node_command
+from ros_util import start_process, stop_process, wait_for
+
+pytestmark = pytest.mark.ros
+SHORT = ['-p', 'sweep:sweep.start_hz:=1.0', '-p', 'sweep:sweep.increment_hz:=3.0',
+         '-p', 'sweep:sweep.max_hz:=13.0', '-p', 'sweep:sweep.periods:=6',
+         '-p', 'sweep:sweep.relax_s:=0.2']
+
+
+@pytest.fixture(scope='module')
+def stack():
+    st = Stack(['plant_sim', 'estimator', 'controller']).start()
+    yield st
+    for name, (code, err) in st.stop().items():
+        assert 'Traceback' not in err, (name, err)
+
+
+def sweep_cmd(out, name):
+    return node_command('sweep', extra=SHORT + ['-p', f'sweep:sweep.out_dir:={out}',
+                                                '-p', f'sweep:sweep.run_name:={name}'])
+
+
+def test_stepped_sweep_over_dds(stack, tmp_path):
+    res = subprocess.run(sweep_cmd(tmp_path, 'full'), capture_output=True, text=True, timeout=240)
+    summary = json.load(open(tmp_path / 'full' / 'summary.json'))
+    print(json.dumps({k: summary[k] for k in ('bandwidth_hz', 'phase_at_7hz_deg', 'complete')}))
+    for p in summary['points']:
+        print(p)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert summary['complete'] and [p['freq_hz'] for p in summary['points']] == [1, 4, 7, 10, 13]
+    assert summary['bandwidth_hz'] is None or summary['bandwidth_hz'] >= 7.0
+    assert all(p['coherence'] > 0.9 for p in summary['points'] if p['freq_hz'] < 10)
+    assert (tmp_path / 'full' / 'bode.png').exists() and (tmp_path / 'full' / 'data.csv').exists()
+
+
+def test_interrupt_mid_sweep_keeps_finished_points(stack, tmp_path):
+    proc = start_process(sweep_cmd(tmp_path, 'cut'))
+    summary_path = tmp_path / 'cut' / 'summary.json'
+
+    def points():
+        try:
+            return len(json.load(open(summary_path))['points'])
+        except (OSError, ValueError):
+            return 0
+    assert wait_for(lambda: points() >= 2, 120), 'no frequency finished'
+    code, out, err = stop_process(proc)                 # SIGINT, like Ctrl-C
+    summary = json.load(open(summary_path))
+    assert summary['complete'] is False and summary['status'] == 'interrupted'
+    assert [p['freq_hz'] for p in summary['points']][:2] == [1, 4]
+    assert all(p['coherence'] > 0.9 for p in summary['points'])
+    assert 'Traceback' not in err
+
+
+def test_bad_sweep_parameter_stops_node_with_one_line():
+    res = subprocess.run(node_command('sweep', extra=['-p', 'sweep:sweep.amplitude:=0.08']),
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'beyond the stroke' in lines[0], res.stderr
