@@ -10,6 +10,7 @@ _REGISTRY = {
     'plant_sim': ('eha_ros.core.plant_sim_params', 'SCHEMA'),
     'estimator': ('eha_ros.core.estimator.params', 'SCHEMA'),
     'controller': ('eha_ros.core.controller.params', 'SCHEMA'),
+    'switch_manager': ('eha_ros.core.redundancy.params', 'SCHEMA'),
     'sweep': ('eha_ros.core.sweep.params', 'SCHEMA'),
 }
 

@@ -22,7 +22,7 @@ NODE = Schema('controller', TF + [
           doc='Tustin prewarp frequency; 0 = plain Tustin'),
     Param('control.watchdog_ticks', 'int', '', 5, 1, 1000,
           doc='no (or stale) estimate for more ticks: zero speed, reported'),
-    Param('control.switch_hold', 'float', 's', 0.02, 0.0, 1.0,
+    Param('control.switch_hold', 'float', 's', 0.0, 0.0, 1.0,
           doc='integrator held this long after the active channel changes'),
     Param('control.drive_check_tolerance', 'float', '', 0.01, 0.0, 1.0,
           doc='relative mismatch between velocity_controller and plant.drive gains to report'),

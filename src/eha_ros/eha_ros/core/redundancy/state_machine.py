@@ -1,0 +1,257 @@
+"""Switch state machine of the dual motor-pump EHA (thesis 3.4, Fig. 3.12, Fig. 3.17).
+
+States: ACTIVE (reported ACTIVE_A / ACTIVE_B: active couple healthy, standby healthy),
+SWITCHING (valve sequence running), DEGRADED (active healthy, standby not: no redundancy left),
+FAILED_SAFE (both couples failed).
+
+Valve/drive sequence of a switch old -> new (on-off valves at each pump's inlet and outlet,
+Fig. 3.12; opening time T_v = plant.valves.onoff_time):
+  t = 0           new drive enabled, its valves still closed: it spins up unloaded to the same
+                  speed reference ("pre-spin"); for an automatic switch the faulty drive is
+                  disabled here and the pre-spin is normally 0 (isolate at once).
+  t = T_pre       channel := new; new valves open and old valves close together: the two
+                  fractions cross over, so the total pump displacement seen by the piston
+                  stays D_p (same speed on both shafts) and the flow hand-over is smooth.
+  t = T_pre+T_v+m old drive disabled (its valves are closed): switch complete.
+
+Safe state (both failed), ``switch.safe_mode``:
+  hold (default): both drives disabled, all pump valves closed, bypass closed. The chambers
+      are sealed: hydraulic lock, the piston holds its last position and creeps only by the
+      cross-piston leakage (C_c dp/A_p: about 0.8 mm/s under 10 kN). A failed (back-drivable)
+      pump with open valves would instead let the load drive the piston at pump speed.
+      A single actuator per surface on this bench: a locked surface is the safe choice.
+  bypass: drives disabled, pump valves closed, A-B bypass open: the piston is free and damped
+      (the flight-control "damped bypass" mode when another actuator on the same surface
+      takes over); under load it moves to the end stop.
+The safe state is latched: only a commanded switch to a couple whose drive and current are
+healthy leaves it, so there is no switching back and forth between two failed couples.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .events import SwitchEvent
+from .health import ChannelSample, HealthMonitor
+
+ACTIVE, SWITCHING, DEGRADED, FAILED_SAFE = 'ACTIVE', 'SWITCHING', 'DEGRADED', 'FAILED_SAFE'
+NAMES = ('A', 'B')
+
+
+def state_name(state: str, channel: int) -> str:
+    """Reported state: ACTIVE_A / ACTIVE_B for ACTIVE, the state itself otherwise."""
+    return f'ACTIVE_{NAMES[channel]}' if state == ACTIVE else state
+
+
+def _pair(c: int, value: bool = True) -> tuple:
+    return (value if c == 0 else not value, value if c == 1 else not value)
+
+
+@dataclass(frozen=True)
+class Select:
+    """Contents of eha_msgs/ChannelSelect."""
+
+    channel: int
+    drive_enable: tuple
+    valve_open: tuple
+    bypass_open: bool = False
+
+    @classmethod
+    def only(cls, c: int) -> 'Select':
+        return cls(c, _pair(c), _pair(c), False)
+
+
+class SwitchManager:
+    """Core of the switch_manager node; ``update(sample)`` once per /eha/state."""
+
+    def __init__(self, p: dict):
+        s = 'switch.'
+        self.p = p
+        self.Ts = p['plant.sim.Ts']
+        self.valve_time = p['plant.valves.onoff_time']
+        self.prespin = p[s + 'prespin_time']
+        self.fault_prespin = p[s + 'fault_prespin_time']
+        self.margin = p[s + 'valve_margin']
+        self.blank = p[s + 'blank_time']
+        self.min_dwell = p[s + 'min_dwell']
+        self.latch_failed = p[s + 'latch_failed']
+        self.safe_mode = p[s + 'safe_mode']
+        self.reset(p[s + 'initial_channel'])
+
+    def reset(self, channel: int = 0):
+        self.health = HealthMonitor(self.p)
+        self.state = ACTIVE
+        self.select = Select.only(channel)
+        self.t, self.seq = 0.0, 0
+        self.steps: list[tuple[float, Select]] = []
+        self.target = channel
+        self.commanded = False
+        self.switch_from = channel
+        self.switch_t0 = 0.0
+        self.switch_count = 0
+        self.latched = [False, False]
+        self.last_auto = -math.inf
+        self.role_since = -math.inf          # time the active couple became the steady driver
+        self.enable_since = [-math.inf, -math.inf]
+        self.reason = 'start'
+        self.events: list[SwitchEvent] = []
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def active(self) -> int:
+        return self.select.channel
+
+    @property
+    def name(self) -> str:
+        return state_name(self.state, self.active)
+
+    def ok(self, c: int) -> bool:
+        """Couple c may drive: all monitors healthy and not latched failed."""
+        return self.health.healthy(c) and not self.latched[c]
+
+    @property
+    def channel_healthy(self) -> list[bool]:
+        return [self.ok(0), self.ok(1)]
+
+    # ------------------------------------------------------------------ per tick
+    def update(self, s: ChannelSample, seq: int = 0) -> bool:
+        """One measured state; returns True when the channel select changed."""
+        self.t, self.seq = s.t, seq
+        before = self.select
+        steady = [self.state in (ACTIVE, DEGRADED) and c == self.active and
+                  s.t - self.role_since >= self.blank for c in range(2)]
+        age = [s.t - self.enable_since[c] for c in range(2)]
+        self.health.update(s, self.select.drive_enable, steady, age)
+        if self.state == SWITCHING:
+            self._switching()
+        elif self.state in (ACTIVE, DEGRADED):
+            self._supervise()
+        return self.select != before
+
+    def _supervise(self):
+        a, o = self.active, 1 - self.active
+        if not self.health.healthy(a):
+            why = f'channel {NAMES[a]} unhealthy: {self.health.why(a)}'
+            if self.ok(o):
+                if self.t - self.last_auto >= self.min_dwell - 1e-9:
+                    self._start(o, why, commanded=False)
+            else:
+                self._safe(f'{why}; channel {NAMES[o]} not available: '
+                           f'{self._why_not(o)}')
+            return
+        want = ACTIVE if self.ok(o) else DEGRADED
+        if want != self.state:
+            kind = 'restored' if want == ACTIVE else 'degraded'
+            why = (f'channel {NAMES[o]} healthy again' if want == ACTIVE else
+                   f'standby channel {NAMES[o]} not available: {self._why_not(o)}')
+            self._transition(want, kind, why, a, a)
+
+    def _switching(self):
+        new, old = self.target, self.switch_from
+        if not self.health.available(new):
+            why = f'channel {NAMES[new]} failed during the switch: {self.health.why(new)}'
+            self.latched[new] = self.latch_failed or self.latched[new]
+            if self.ok(old) and self.health.available(old):
+                self._start(old, why, commanded=False)
+            else:
+                self._safe(why)
+            return
+        self._apply_due()
+        if not self.steps:
+            self.role_since = self.t
+            state = ACTIVE if self.ok(1 - new) else DEGRADED
+            self._transition(state, 'switch_done',
+                             f'switch {NAMES[old]} -> {NAMES[new]} complete after '
+                             f'{(self.t - self.switch_t0) * 1e3:.0f} ms', old, new)
+
+    # ------------------------------------------------------------------ commands
+    def request(self, channel: int, reason: str = '') -> tuple[bool, str]:
+        """Commanded switch (/eha/switch_channel); returns (accepted, message)."""
+        reason = reason.strip() or 'commanded'
+        if channel not in (0, 1):
+            return False, f'channel {channel!r}: expected 0 (A) or 1 (B)'
+        if self.state == SWITCHING:
+            return self._refuse(channel, reason, f'a switch to {NAMES[self.target]} is in '
+                                                 f'progress')
+        if channel == self.active and self.state != FAILED_SAFE:
+            return True, f'channel {NAMES[channel]} is already active ({self.name})'
+        if not self.health.available(channel):
+            return self._refuse(channel, reason, f'channel {NAMES[channel]} not available: '
+                                                 f'{self.health.why(channel)}')
+        self.latched[channel] = False
+        self.health.rearm(channel)
+        self._start(channel, f'commanded: {reason}', commanded=True)
+        return True, (f'switching {NAMES[self.switch_from]} -> {NAMES[channel]} '
+                      f'(switch {self.switch_count})')
+
+    # ------------------------------------------------------------------ actions
+    def _start(self, new: int, why: str, commanded: bool):
+        old = self.active
+        prespin = self.prespin if commanded else self.fault_prespin
+        cur = self.select
+        en = list(cur.drive_enable)
+        en[new] = True
+        if not commanded:
+            en[old] = False                  # the faulty couple's drive goes off at once
+            self.last_auto = self.t
+            if self.latch_failed and old != new:
+                self.latched[old] = True
+        t0 = self.t
+        s0 = Select(old, tuple(en), cur.valve_open, cur.bypass_open)
+        s1 = Select(new, tuple(en), _pair(new), False)
+        self.steps = [(t0, s0), (t0 + prespin, s1),
+                      (t0 + prespin + self.valve_time + self.margin, Select.only(new))]
+        from_state = self.name
+        self.target, self.switch_from, self.switch_t0 = new, old, t0
+        self.commanded = commanded
+        self.switch_count += 1
+        self.state = SWITCHING
+        self._apply_due()
+        self._event('switch_start', from_state, old, new, why)
+
+    def _safe(self, why: str):
+        from_state = self.name
+        self.steps = []
+        self._set(Select(self.active, (False, False), (False, False),
+                         self.safe_mode == 'bypass'))
+        self.state = FAILED_SAFE
+        self._event('safe', from_state, self.active, self.active,
+                    f'{why}; safe state {self.safe_mode}')
+
+    def _refuse(self, channel: int, reason: str, why: str) -> tuple[bool, str]:
+        self._event('refused', self.name, self.active, channel,
+                    f'commanded switch to {NAMES[channel]} ({reason}) refused: {why}',
+                    commanded=True, keep_reason=True)
+        return False, why
+
+    def _transition(self, state: str, kind: str, why: str, old: int, new: int):
+        from_state = self.name
+        self.state = state
+        self._event(kind, from_state, old, new, why)
+
+    def _apply_due(self):
+        while self.steps and self.steps[0][0] <= self.t + 1e-9:
+            self._set(self.steps.pop(0)[1])
+
+    def _set(self, sel: Select):
+        for c in range(2):
+            if sel.drive_enable[c] != self.select.drive_enable[c]:
+                self.enable_since[c] = self.t
+                self.health.command_changed(c)
+        self.select = sel
+
+    def _why_not(self, c: int) -> str:
+        if self.latched[c] and self.health.healthy(c):
+            return 'latched failed (command a switch to it to retry)'
+        return self.health.why(c)
+
+    def _event(self, kind, from_state, old, new, why, commanded=None, keep_reason=False):
+        if not keep_reason:
+            self.reason = why
+        ev = SwitchEvent(
+            t=round(self.t, 9), seq=int(self.seq), kind=kind, from_state=from_state,
+            to_state=self.name, from_channel=int(old), to_channel=int(new), reason=why,
+            commanded=self.commanded if commanded is None else commanded,
+            switch_count=self.switch_count,
+            health={NAMES[c]: self.health.figures(c) for c in range(2)})
+        self.events.append(ev)
