@@ -30,7 +30,12 @@ def test_integrator_and_lightly_damped_hydraulic_pair(abcd):
     assert 4000 < wn < 5500 and zeta < 0.1, (wn, zeta)
 
 
+# thesis velocity-loop gains of eq. 4.71; config/plant.yaml carries the design_qft gains
+THESIS_DRIVE = {'plant.drive.Kp_w': 0.45, 'plant.drive.Ki_w': 56.0, 'plant.drive.lowpass_w': 2555.0}
+
+
 def test_velocity_loop_poles_match_eq_4_72():
+    P = nominal_plant(THESIS_DRIVE)
     poles = lin.poles(lin.velocity_loop_abcd(P))
     slow = sorted(abs(p) for p in poles if 1 < abs(p) < 4000)
     thesis = sorted([530.6, 158.3, math.sqrt(7.257e6), math.sqrt(7.257e6)])

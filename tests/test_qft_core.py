@@ -6,8 +6,9 @@ from eha_ros.core.params import load
 from eha_ros.core.plant import linear
 from eha_ros.core.plant.parameters import PLANT_SCHEMA
 from eha_ros.core.qft import bounds as qb
-from eha_ros.core.qft import family, freqresp, lti, pso
-from eha_ros.core.qft.spec import default_spec
+from eha_ros.core.params import ParamError
+from eha_ros.core.qft import family, freqresp, lti, prefilter, pso, verify
+from eha_ros.core.qft.spec import QftSpec, default_spec, load_spec
 
 
 @pytest.fixture(scope='module')
@@ -34,8 +35,12 @@ def test_family_size_and_grid(setup):
 
 
 def test_cascade_matches_linear_velocity_model(setup):
-    """Nominal closed velocity loop with the thesis G_v equals linear.velocity_abcd(lowpass)."""
-    plant, _, _, casc = setup
+    """Nominal closed velocity loop with the drive's G_v (plant.drive gains, eq. 4.65) equals
+    linear.velocity_abcd(lowpass) of the same plant file."""
+    plant, _, fam, _ = setup
+    Gv = lti.velocity_controller(plant['plant.drive.Kp_w'], plant['plant.drive.Ki_w'],
+                                 plant['plant.drive.lowpass_w'], fam.k_T_nominal)
+    casc = family.velocity_loop_plants(fam, Gv)
     w = np.logspace(-2, 4, 40)
     abcd = linear.velocity_abcd(plant, lowpass=True)
     assert np.allclose(casc.P_omega(w)[-1], linear.freqresp(abcd, w, 0, 0), rtol=1e-9)
@@ -160,3 +165,81 @@ def test_pso_deterministic_and_converges():
     assert np.array_equal(r1.x, r2.x) and r1.history == r2.history
     assert not np.array_equal(r1.x, r3.x)
     assert r1.cost < 1e-3 and np.all(np.diff(r1.history) <= 0)
+
+
+def test_loop_delay_in_position_responses(setup):
+    """T_d = 1.5 Ts + drive.delay (2.5 ms) multiplies P_omega (not P_d); templates unchanged;
+    the Pade state space matches e^{-j w T_d} well below 1/T_d."""
+    plant, spec, fam, casc = setup
+    Td = spec.loop_delay(fam.drive_delay)
+    assert fam.drive_delay == plant['plant.drive.delay'] == 0.001
+    assert Td == pytest.approx(1.5 * 0.001 + 0.001) and spec.delay_samples(fam.drive_delay) == 2
+    over = QftSpec({**spec.values, 'digital.delay': 0.004})
+    assert over.loop_delay(fam.drive_delay) == 0.004
+    cd = family.CascadePlants(casc.A, casc.B_ref, casc.B_load, casc.C_x, casc.C_w, Td)
+    w = np.logspace(-1, 3, 30)
+    assert np.allclose(cd.P_omega(w), casc.P_omega(w) * np.exp(-1j * w * Td), rtol=1e-12)
+    assert np.allclose(cd.P_d(w), casc.P_d(w), rtol=1e-12)
+    q0 = casc.P_omega(w)[:-1] / casc.P_omega(w)[-1]
+    assert np.allclose(cd.P_omega(w)[:-1] / cd.P_omega(w)[-1], q0, rtol=1e-9)
+    A, B, C = cd.delayed_ss()
+    wl = np.logspace(-1, np.log10(400), 12)
+    h = freqresp.ss_freqresp(A[[0, -1]], B[[0, -1]], C[[0, -1]], wl)
+    assert np.allclose(h, cd.P_omega(wl)[[0, -1]], rtol=2e-3)
+    # the bounds see the delay only through L0: nominal L0 phase is lower by w T_d
+    L0 = cd.P_omega(w)[-1] / casc.P_omega(w)[-1]
+    assert np.allclose(np.angle(L0), np.angle(np.exp(-1j * w * Td)))
+
+
+def test_zp_box_default_and_realisability(tmp_path):
+    spec = default_spec()
+    assert spec['position.zp_min'] == 0.5 and spec['position.zp_max'] == 1000.0
+    bad = tmp_path / 'spec.yaml'
+    bad.write_text('design_qft:\n  ros__parameters:\n    position: {zp_max: 2000.0}\n')
+    with pytest.raises(ParamError) as err:
+        load_spec(str(bad))
+    msg = str(err.value)
+    assert '\n' not in msg and 'position.zp_max' in msg and 'pi/(2 digital.Ts)' in msg
+
+
+def test_digital_loop_matches_continuous_with_delay(setup):
+    """ZOH plant + 2 shift states + Tustin G: nominal loop response, margins and max|T| agree
+    with the continuous loop times e^{-j w T_d}; eigenvalues inside the unit circle."""
+    _, spec, fam, casc = setup
+    Td = spec.loop_delay(fam.drive_delay)
+    cd = family.CascadePlants(casc.A, casc.B_ref, casc.B_load, casc.C_x, casc.C_w, Td)
+    G = lti.thesis_position()
+    dl = verify.digital_loop(cd, spec, fam)
+    assert dl.nd == 2
+    w = np.logspace(-1, np.log10(2500), 300)
+    Lz = dl.loop_freq(G, w)
+    Lc = cd.P_omega(w)[-1] * G.freq(w)
+    low = w < 300
+    assert np.max(np.abs(qb.db(np.abs(Lz[low] / Lc[low])))) < 0.3
+    assert np.max(np.abs(np.angle(Lz[low] / Lc[low], deg=True))) < 3.0
+    gz, pz = verify.margins(Lz[None], w)
+    gc, pc = verify.margins(Lc[None], w)
+    assert abs(gz[0] - gc[0]) < 1.0 and abs(pz[0] - pc[0]) < 5.0
+    assert np.all(dl.max_abs_eig(G) < 1.0)
+    # a loop gain beyond the digital GM is unstable in the discrete model
+    k = 10 ** ((gz[0] + 2) / 20)
+    Gk = lti.Zpk(G.zeros, G.poles, G.gain * k)
+    assert dl.max_abs_eig(Gk)[-1] > 1.0
+    # step: unit DC gain, starts at 0 (plant has no feed-through), approaches 1
+    y = dl.steps(G, 1.0)
+    assert abs(y[-1, -1] - 1) < 0.01 and y[-1, 0] == 0.0      # (slow tail of the 0.61 zero)
+
+
+def test_step_metrics_and_filtered_steps():
+    Ts = 0.001
+    t = np.arange(1001) * Ts
+    y = 1 - np.exp(-t / 0.05) * np.cos(40 * t)
+    os_pct, ts = prefilter.step_metrics(y[None], Ts, 0.02)
+    assert os_pct[0] == pytest.approx(100 * (y.max() - 1))
+    k = np.nonzero(np.abs(y - 1) > 0.02)[0][-1]
+    assert ts[0] == pytest.approx((k + 1) * Ts)
+    assert np.isinf(prefilter.step_metrics(2 * t[None], Ts)[1][0])     # never settles
+    # F applied to a step response by Tustin filtering == discrete F step (unit DC gain)
+    F = lti.thesis_prefilter()
+    ys = prefilter.filtered_steps(F, np.ones((1, 400)), Ts)
+    assert abs(ys[0, -1] - 1) < 1e-6 and ys[0, 0] < 0.5

@@ -25,7 +25,7 @@ def run(args=None) -> dict:
     reps = 3
     t = time.perf_counter()
     for _ in range(reps):
-        Pw, Pd = casc.P_omega(wall), casc.P_d(wall)
+        casc.P_omega(wall), casc.P_d(wall)
     out['freqresp_s'] = (time.perf_counter() - t) / reps
     out['freqresp_evals'] = int(2 * (fam.n + 1) * len(wall))
     wd = np.logspace(-2, 3, 400)
@@ -35,7 +35,6 @@ def run(args=None) -> dict:
 
     def full(w):
         # every spec evaluated at every one of the given frequencies (worst case)
-        import copy
         vals = dict(spec.values)
         for k in ('position.stab_freqs', 'position.sens_freqs', 'position.stiff_freqs',
                   'position.track_freqs'):

@@ -39,6 +39,9 @@ def parse(argv):
                     help='few PSO iterations and a short cross-check (tests); result may not meet the specs')
     ap.add_argument('--no-crosscheck', action='store_true', help='skip the differential_evolution cross-check')
     ap.add_argument('--strict', action='store_true', help='exit 1 if the design fails any check')
+    ap.add_argument('--update-plant-yaml', action='store_true',
+                    help='write the designed velocity controller into the simulated drive: '
+                         'plant.drive.Kp_w, Ki_w, lowpass_w of --plant (text substitution)')
     return ap.parse_args(argv)
 
 
@@ -54,9 +57,45 @@ def progress(name, total):
     return cb
 
 
+DRIVE_KEYS = (('Kp_w', '[Nm/(rad/s)] velocity loop P gain K_1 (times 1/k_T)', '0.45'),
+              ('Ki_w', '[Nm/rad] velocity loop I gain K_2 (times 1/k_T)', '56'),
+              ('lowpass_w', '[rad/s] velocity loop low-pass K_3', '2555'))
+
+
+def update_plant_yaml(path, K, when=''):
+    """Rewrite exactly plant.drive.Kp_w, Ki_w, lowpass_w (= K1, K2, K3 of eq. 4.65) in a plant
+    YAML, keeping every other line, comment and the indentation."""
+    import re
+    try:
+        with open(path, encoding='utf-8') as fh:
+            lines = fh.read().split('\n')
+    except OSError as err:
+        raise UsageError(f'cannot read {path}: {err}') from None
+    # the drive: block (its indentation) and its direct children
+    start = [i for i, ln in enumerate(lines) if re.match(r'^\s*drive:\s*(#.*)?$', ln)]
+    if len(start) != 1:
+        raise UsageError(f'{path}: expected exactly one "drive:" block, found {len(start)}')
+    ind0 = len(lines[start[0]]) - len(lines[start[0]].lstrip())
+    end = start[0] + 1
+    while end < len(lines) and (not lines[end].strip() or lines[end].lstrip().startswith('#') or
+                                len(lines[end]) - len(lines[end].lstrip()) > ind0):
+        end += 1
+    for (key, what, thesis), val in zip(DRIVE_KEYS, K):
+        hits = [i for i in range(start[0] + 1, end)
+                if re.match(rf'^\s*{key}:\s*[^\s#]+', lines[i])]
+        if len(hits) != 1:
+            raise UsageError(f'{path}: expected one plant.drive.{key} line, found {len(hits)}')
+        i = hits[0]
+        ind = lines[i][:len(lines[i]) - len(lines[i].lstrip())]
+        lines[i] = (f'{ind}{key}: {float(val)!r}  # {what}; G_v of eq. 4.65 from scripts/design_qft'
+                    f'{" " + when if when else ""}; thesis eq. 4.71: {thesis}')
+    with open(path, 'w', encoding='utf-8') as fh:
+        fh.write('\n'.join(lines))
+
+
 def analyse_set(fam, spec, Gv, G, F):
     bv = qb.velocity_bounds(spec, lambda w: family.torque_responses(fam, w)[0])
-    casc = family.velocity_loop_plants(fam, Gv)
+    casc = family.velocity_loop_plants(fam, Gv, spec.loop_delay(fam.drive_delay))
     bp = qb.position_bounds(spec, casc.P_omega, casc.P_d)
     return verify.analyse(fam, spec, Gv, G, F, bv, bp), bv, bp, casc
 
@@ -93,15 +132,31 @@ def main(argv=None):
     K1, K2, K3 = (10 ** rv.x).tolist()
     summary['velocity'] = {'K1': K1, 'K2': K2, 'K3': K3, 'pso_cost': rv.cost}
     log(f'{PROG}: G_v = (1/k_T)({K1:.4g} + {K2:.4g}/s)/(s/{K3:.4g} + 1), cost {rv.cost:.4g}')
+    drive_msg = (f'drive settings (config/plant.yaml, the drive applies 1/k_T): plant.drive.Kp_w = '
+                 f'{K1!r} (K1), plant.drive.Ki_w = {K2!r} (K2), plant.drive.lowpass_w = {K3!r} (K3)')
+    log(f'{PROG}: {drive_msg}')
+    T_d = spec.loop_delay(fam.drive_delay)
+    summary['loop_delay_s'] = T_d
+    summary['Ts'] = spec['digital.Ts']
+    log(f'{PROG}: position-loop delay T_d = {1e3 * T_d:.4g} ms '
+        f'({"spec digital.delay" if spec["digital.delay"] >= 0 else "1.5 Ts + plant.drive.delay"}), '
+        f'Ts = {spec["digital.Ts"]:g} s')
 
     # position loop on the family of closed velocity loops
-    casc = family.velocity_loop_plants(fam, Gv)
+    casc = family.velocity_loop_plants(fam, Gv, T_d)
     bp = qb.position_bounds(spec, casc.P_omega, casc.P_d)
     qb.check_feasible(bp, spec, 'position')
     pc = cost.PositionCost(casc, spec, bp)
     lo_p = np.full(6, np.log10(spec['position.zp_min']))
     hi_p = np.full(6, np.log10(spec['position.zp_max']))
     rp = pso.pso(pc, lo_p, hi_p, iterations=it_p, progress=progress('G PSO', it_p), **pp)
+    pc.ws_margin_db = spec['pso.Ws_margin_db']      # polish stops short of the W_s edge
+    xpol, fpol = pso.polish(pc, rp.x, lo_p, hi_p, maxfev=40 if a.quick else 400)
+    pc.ws_margin_db = 0.0
+    log(f'{PROG}: Nelder-Mead polish of the PSO best (W_s - {spec["pso.Ws_margin_db"]:g} dB): '
+        f'cost {rp.cost:.4g} -> {fpol:.4g}')
+    summary['position_polish'] = {'pso_cost': rp.cost, 'polished_cost': fpol}
+    rp.x, rp.cost = xpol, fpol
     G = cost.position_ctrl(rp.x, spec['position.K'])
     zp = (10 ** rp.x).tolist()
     summary['position'] = {'K': spec['position.K'], 'z': zp[:3], 'p': zp[3:], 'pso_cost': rp.cost}
@@ -124,11 +179,14 @@ def main(argv=None):
     Lt = casc.P_omega(wt) * G.freq(wt)[None]
     wf = np.logspace(-1, 4, 1500)
     Lf = casc.P_omega(wf)[-1] * G.freq(wf)
+    yT = verify.digital_loop(casc, spec, fam).steps(G, spec['digital.horizon'])
     F, finfo = prefilter.design_prefilter(spec, Lt / (1 + Lt), Lf / (1 + Lf), wf, seed=a.seed,
-                                          maxiter=10 if a.quick else 60)
+                                          maxiter=10 if a.quick else 60, y_T=yT)
     summary['prefilter'] = finfo
     log(f'{PROG}: F corners a, b, c = {[round(v, 3) for v in finfo["corners"]]} rad/s, '
-        f'tracking margin {finfo["margin_db"]:.3g} dB, nominal bandwidth {finfo["bandwidth_nominal_hz"]:.3g} Hz')
+        f'tracking margin {finfo["margin_db"]:.3g} dB, nominal bandwidth {finfo["bandwidth_nominal_hz"]:.3g} Hz, '
+        f'digital step worst overshoot {finfo["step_overshoot_worst_pct"]:.3g} %, '
+        f'settling {finfo["step_settling_worst_s"]:.3g} s')
 
     # analysis of both controller sets
     res_d = verify.analyse(fam, spec, Gv, G, F, bv, bp)
@@ -150,8 +208,14 @@ def main(argv=None):
               f'G = {spec["position.K"]:g}/s prod (1 + s/z_i)/(1 + s/p_i), z = {[float(f"{v:.6g}") for v in zp[:3]]}, '
               f'p = {[float(f"{v:.6g}") for v in zp[3:]]}\n'
               f'F corners (a, b, c) = {[float(f"{v:.6g}") for v in finfo["corners"]]} rad/s\n'
+              f'position-loop delay T_d = {1e3 * T_d:.4g} ms (1.5 Ts + plant.drive.delay), Ts = {spec["digital.Ts"]:g} s, '
+              f'digital check: ZOH plant, {spec.delay_samples(fam.drive_delay)} delay samples, Tustin G and F\n'
+              f'drive gains (plant.drive.Kp_w, Ki_w, lowpass_w) = ({K1:.6g}, {K2:.6g}, {K3:.6g})\n'
               f'all checks on the {fam.n}-plant family: {"PASS" if res_d["all_pass"] else "FAIL"} (report {rdir})')
     report.write_controller_yaml(a.out, Gv, G, F, header)
+    if a.update_plant_yaml:
+        update_plant_yaml(a.plant, (K1, K2, K3), f'(seed {a.seed}, report {rdir})')
+        log(f'{PROG}: updated plant.drive.Kp_w, Ki_w, lowpass_w in {a.plant}')
     tout = a.thesis_out or os.path.join(os.path.dirname(os.path.abspath(a.out)), 'controller_thesis.yaml')
     report.write_controller_yaml(tout, Gv_t, lti.thesis_position(), lti.thesis_prefilter(),
                                  'Thesis controllers: G_v eq. 4.71, G eq. 4.76, F eq. 4.77 '
@@ -171,6 +235,7 @@ def main(argv=None):
         plots.closed_loop_bode(os.path.join(rdir, f'bode_closed_loop_{name}.png'), wb,
                                Fx.freq(wb)[None] * Lb / (1 + Lb), spec,
                                f'closed-loop family F T ({name})')
+    plots.steps(os.path.join(rdir, 'step_digital.png'), {'designed': res_d, 'thesis': res_t}, spec)
     plots.convergence(os.path.join(rdir, 'pso_convergence.png'),
                       {'G_v (velocity)': rv.history, 'G (position)': rp.history})
     md = ['# QFT design report', '', '```', header, '```', '',
@@ -178,16 +243,25 @@ def main(argv=None):
           'Velocity loop designed on omega/i_ref (speed output of eq. 3.35; the thesis writes P_i in 4.52).',
           f'Dense-grid checks: {spec["verify.n_points"]} points {spec["verify.w_min"]}..{spec["verify.w_max"]} rad/s; '
           f'sensitivity and stiffness up to {spec["verify.band_max_hz"]} Hz; tracking up to {spec["prefilter.w_max"]} rad/s '
-          f'with tolerance {spec["position.track_tol_db"]} dB.', '',
+          f'with tolerance {spec["position.track_tol_db"]} dB.',
+          f'Every position-loop response (bounds, PSO costs, prefilter, dense checks) includes the loop '
+          f'delay e^(-j w T_d), T_d = {1e3 * T_d:.4g} ms = 1.5 Ts + plant.drive.delay (one sample from '
+          f'measurement to applied command, ZOH ~ Ts/2, drive FIFO {1e3 * fam.drive_delay:g} ms); eigenvalues use '
+          f'a 4th-order Pade cascade. Digital rows: each closed velocity loop ZOH-discretised at Ts = '
+          f'{spec["digital.Ts"]:g} s, {spec.delay_samples(fam.drive_delay)} shift states, G and F by Tustin '
+          f'(controller/discrete.py, prewarp {spec["digital.prewarp_w"] or "none"}), step {1e3 * spec["digital.step"]:g} mm.',
+          f'PSO box of z_i, p_i: [{spec["position.zp_min"]:g}, {spec["position.zp_max"]:g}] rad/s.',
+          f'Simulated drive: {drive_msg}{" (written to " + a.plant + ")" if a.update_plant_yaml else ""}.', '',
           report.markdown({'designed': res_d, 'thesis (4.71/4.76/4.77)': res_t}), '',
           f'Phase grid {spec["bounds.phase_step_deg"]} deg: worst bound change between adjacent phases (dB) = '
           f'{summary["phase_resolution_db"]}', '',
           'Figures: nichols_velocity.png, nichols_position.png, nichols_position_thesis.png, '
-          'bode_closed_loop_designed.png, bode_closed_loop_thesis.png, pso_convergence.png']
+          'bode_closed_loop_designed.png, bode_closed_loop_thesis.png, step_digital.png, pso_convergence.png']
     with open(os.path.join(rdir, 'report.md'), 'w', encoding='utf-8') as fh:
         fh.write('\n'.join(md) + '\n')
     report.write_json(os.path.join(rdir, 'report.json'), summary)
     print(report.markdown({'designed': res_d, 'thesis': res_t}))
+    print(f'{PROG}: {drive_msg}')
     print(f'{PROG}: wrote {a.out}, {tout} and report {rdir} in {summary["elapsed_s"]:.1f} s; '
           f'designed controller {"meets every check" if res_d["all_pass"] else "FAILS some checks"} '
           f'on all {fam.n} plants')

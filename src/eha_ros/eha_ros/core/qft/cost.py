@@ -13,10 +13,10 @@ from .lti import Zpk, position_controller, velocity_controller
 W_DENSE = np.logspace(-2, np.log10(3000.0), 240)
 
 
-def _Ws_excess_db(L, Ws):
-    """Eq. 4.70 over the family: max_r,w |L/(1+L)| in dB above W_s (>= 0); L (P, N, F)."""
+def _Ws_excess_db(L, Ws, margin_db=0.0):
+    """Eq. 4.70 over the family: max_r,w |L/(1+L)| in dB above W_s - margin (>= 0); L (P, N, F)."""
     T = np.abs(L / (1 + L)).max(axis=(1, 2))
-    return np.maximum(0.0, qb.db(T) - qb.db(Ws))
+    return np.maximum(0.0, qb.db(T) - qb.db(Ws) + margin_db)
 
 
 def _eig_penalty(A_batch, weight):
@@ -82,7 +82,8 @@ class VelocityCost:
 
 class PositionCost:
     """J = m1 sum viol_dB (hard, 4.75) + m2 sum_{effort w} |L0| dB (soft: lower gain is
-    cheaper) + Ws_weight * J_s (4.70 on the family, dense grid) + eigenvalue penalty."""
+    cheaper) + Ws_weight * J_s (4.70 on the family, dense grid) + eigenvalue penalty; every
+    response includes the loop delay (casc.P_omega; Pade approximant for the eigenvalues)."""
 
     def __init__(self, casc: CascadePlants, spec, bset: qb.BoundSet):
         self.c, self.spec, self.b = casc, spec, bset
@@ -91,7 +92,9 @@ class PositionCost:
         ew = np.asarray(spec['position.effort_freqs'], float)
         self.effort = np.isin(np.round(bset.w, 9), np.round(ew, 9))
         self.K = spec['position.K']
-        self.Cx = np.broadcast_to(casc.C_x, casc.A.shape[:2])
+        self.ws_margin_db = 0.0        # the local polish aims at W_s - pso.Ws_margin_db
+        # closed-loop eigenvalues with a Pade approximant of the loop delay
+        self.Ae, self.Be, self.Cx = casc.delayed_ss()
 
     def controllers(self, X):
         return [position_ctrl(x, self.K) for x in np.atleast_2d(X)]
@@ -104,8 +107,9 @@ class PositionCost:
         viol = qb.violation_db(self.b.merged, L0)
         soft = np.where(self.effort, qb.db(np.abs(L0)), 0.0)
         Gdense = np.array([c.freq(W_DENSE) for c in ctrls])
-        js = _Ws_excess_db(self.Pd[None] * Gdense[:, None, :], self.spec['position.Ws'])
-        Acl = np.concatenate([feedback(self.c.A, self.c.B_ref, self.Cx, c.ss())[0][None]
+        js = _Ws_excess_db(self.Pd[None] * Gdense[:, None, :], self.spec['position.Ws'],
+                           self.ws_margin_db)
+        Acl = np.concatenate([feedback(self.Ae, self.Be, self.Cx, c.ss())[0][None]
                               for c in ctrls])
         pen, mr = _eig_penalty(Acl.reshape(-1, *Acl.shape[2:]), self.spec['pso.stability_penalty'])
         pen = pen.reshape(len(ctrls), -1).max(axis=1)

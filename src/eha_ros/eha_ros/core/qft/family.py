@@ -3,6 +3,8 @@
 P_iw = omega/i_ref and P_i = x/i_ref from eq. 3.35 (torque-mode plant, linear.torque_abcd);
 P_omega = x/omega_ref and P_d = x/F_L of each plant's OWN closed velocity loop (eq. 3.42 with
 the designed G_v), built in state space so uncertainty propagates through the cascade.
+P_omega carries the digital loop delay e^{-j w T_d} (T_d = 1.5 Ts + drive delay: one sample
+from measurement to applied command, ZOH ~ Ts/2, drive FIFO); the load path P_d does not.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import numpy as np
 from ..plant import linear
 from ..plant.parameters import PlantParams
 from .freqresp import feedback, pad, ss_freqresp
-from .lti import Zpk
+from .lti import Zpk, pade_delay
 
 NAMES = ('C_eq', 'D_p', 'beta', 'k_T', 'k_E')
 I_W, I_X, I_V = 1, 2, 3          # state indices of omega, x, xdot in eq. 3.35
@@ -57,6 +59,7 @@ class TorqueFamily:
     B0_load: np.ndarray
     k_T_nominal: float
     D_p_over_A_p: float
+    drive_delay: float = 0.0    # plant.drive.delay [s] of the nominal plant file
 
     @property
     def n(self) -> int:
@@ -83,7 +86,8 @@ def build_family(plant: dict, spec) -> TorqueFamily:
     A0, B0, BL0 = _abcd(scaled_params(plant, spec['family.nominal_scale']))
     p0 = PlantParams.from_dict(plant)
     return TorqueFamily(scales, np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
-                        np.array([m[2] for m in mats]), A0, B0, BL0, p0.k_T, p0.D_p / p0.A_p)
+                        np.array([m[2] for m in mats]), A0, B0, BL0, p0.k_T, p0.D_p / p0.A_p,
+                        float(plant['plant.drive.delay']))
 
 
 def C_row(idx: int, n: int) -> np.ndarray:
@@ -101,24 +105,42 @@ class CascadePlants:
     B_load: np.ndarray       # (N+1, n)   F_L input
     C_x: np.ndarray          # (n,)       position output
     C_w: np.ndarray          # (n,)       motor speed output
+    delay: float = 0.0       # position-loop delay T_d [s] on omega_ref (not in A)
 
     def P_omega(self, w):
-        """x/omega_ref (eq. 3.42 with the designed G_v), (N+1, F)."""
-        return ss_freqresp(self.A, self.B_ref, self.C_x, w)
+        """x/omega_ref (eq. 3.42 with the designed G_v) times e^{-j w T_d}, (N+1, F)."""
+        w = np.atleast_1d(np.asarray(w, float))
+        return ss_freqresp(self.A, self.B_ref, self.C_x, w) * np.exp(-1j * w * self.delay)[None]
+
+    def delayed_ss(self, order: int = 4):
+        """(A, B_ref, C_x) with a Pade approximant of the delay at the omega_ref input
+        (for closed-loop eigenvalues; frequency responses use the exact e^{-j w T_d})."""
+        if self.delay <= 0:
+            return self.A, self.B_ref, np.broadcast_to(self.C_x, self.A.shape[:2])
+        Ad, Bd, Cd, Dd = pade_delay(self.delay, order).ss()
+        N, n, _ = self.A.shape
+        m = Ad.shape[0]
+        A = np.zeros((N, n + m, n + m))
+        A[:, :n, :n] = self.A
+        A[:, :n, n:] = self.B_ref[:, :, None] * Cd[0][None, None, :]
+        A[:, n:, n:] = Ad
+        B = np.concatenate([self.B_ref * Dd[0, 0], np.broadcast_to(Bd[:, 0], (N, m))], axis=1)
+        return A, B, np.broadcast_to(pad(self.C_x, m), (N, n + m))
 
     def P_d(self, w):
         """x/F_L of the same closed velocity loop, (N+1, F)."""
         return ss_freqresp(self.A, self.B_load, self.C_x, w)
 
 
-def velocity_loop_plants(fam: TorqueFamily, Gv: Zpk) -> CascadePlants:
-    """Close each plant's velocity loop (speed feedback, i_ref = G_v (omega_ref - omega))."""
+def velocity_loop_plants(fam: TorqueFamily, Gv: Zpk, delay: float = 0.0) -> CascadePlants:
+    """Close each plant's velocity loop (speed feedback, i_ref = G_v (omega_ref - omega));
+    delay: position-loop delay T_d [s] carried by P_omega."""
     A, B, BL = fam.all_A()
     n = A.shape[1]
     Cw = np.broadcast_to(C_row(I_W, n), (A.shape[0], n))
     Acl, Br, (Bl,) = feedback(A, B, Cw, Gv.ss(), extra_B=(BL,))
     m = Acl.shape[1] - n
-    return CascadePlants(Acl, Br, Bl, pad(C_row(I_X, n), m), pad(C_row(I_W, n), m))
+    return CascadePlants(Acl, Br, Bl, pad(C_row(I_X, n), m), pad(C_row(I_W, n), m), float(delay))
 
 
 def torque_responses(fam: TorqueFamily, w):

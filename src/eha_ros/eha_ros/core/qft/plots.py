@@ -88,3 +88,27 @@ def convergence(path, histories: dict):
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def steps(path, results: dict, spec):
+    """Nominal discrete step responses of F T (name -> analyse() dict) with the spec limits."""
+    fig, ax = plt.subplots(figsize=(8, 5))
+    a = 1e3 * spec['digital.step']
+    for name, r in results.items():
+        ax.step(np.asarray(r['step_nominal_t']), 1e3 * np.asarray(r['step_nominal_y']),
+                where='post', label=f'{name}: {r["step_overshoot_pct"]:.2g} % overshoot, '
+                f'{r["step_settling_s"]:.3g} s settling')
+    band = spec['digital.settling_band']
+    ax.axhline(a * (1 + spec['digital.overshoot_max_pct'] / 100), color='r', ls=':', label='overshoot limit')
+    for v in (a * (1 - band), a * (1 + band)):
+        ax.axhline(v, color='g', ls='--', lw=0.8)
+    ax.axvline(spec['digital.settling_max'], color='g', ls=':', label='settling limit')
+    ax.set_xlim(0, min(1.0, spec['digital.horizon']))
+    ax.set_xlabel('time (s)')
+    ax.set_ylabel('position (mm)')
+    ax.set_title(f'digital loop at Ts = {spec["digital.Ts"]:g} s, nominal plant, {a:g} mm step')
+    ax.grid(True)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -73,6 +73,20 @@ ROWS = [
     ('bw_max_hz', 'closed-loop -3 dB bandwidth of F T, max over family (Hz)', None),
     ('bw_nominal_hz', 'closed-loop -3 dB bandwidth, nominal plant (Hz)', 'bandwidth_nominal'),
     ('pos_bound_violation_db', 'position loop: worst bound violation at design w (dB)', 'pos_bounds'),
+    ('loop_delay_ms', 'position-loop delay T_d in all of the above (ms)', None),
+    ('dig_Ts_ms', 'digital: Ts (ms); ZOH plant, Tustin G and F', None),
+    ('dig_delay_samples', 'digital: delay shift states (samples)', None),
+    ('dig_max_abs_eig', 'digital: max |eig| of the closed loop over family', 'dig_stable'),
+    ('nom_cont_max_T_db', 'nominal max|T| (dB), continuous with delay', None),
+    ('nom_dig_max_T_db', 'nominal max|T| (dB), discrete', 'dig_agree'),
+    ('nom_cont_gm_db', 'nominal GM (dB), continuous with delay', None),
+    ('nom_dig_gm_db', 'nominal GM (dB), discrete', None),
+    ('nom_cont_pm_deg', 'nominal PM (deg), continuous with delay', None),
+    ('nom_dig_pm_deg', 'nominal PM (deg), discrete', None),
+    ('step_overshoot_pct', 'digital step of F T, nominal: overshoot (%)', 'step_nominal'),
+    ('step_settling_s', 'digital step of F T, nominal: 2 % settling time (s)', None),
+    ('step_overshoot_worst_pct', 'digital step of F T, worst plant: overshoot (%)', 'step_family'),
+    ('step_settling_worst_s', 'digital step of F T, worst plant: 2 % settling time (s)', None),
 ]
 
 

@@ -1,6 +1,10 @@
 """Verification beyond the design frequencies: for given (G_v, G, F) on every plant of the
 family, closed-loop eigenvalues and every specification on a dense frequency grid, GM/PM,
-closed-loop bandwidth, and the design-frequency bound check."""
+closed-loop bandwidth, and the design-frequency bound check, all with the loop delay T_d;
+then the DIGITAL loop: each closed velocity loop discretised with ZOH at Ts, the delay as
+shift states (round(drive.delay/Ts) + 1 samples), G and F by Tustin (controller/discrete.py):
+eigenvalues, nominal max|T|/GM/PM against the continuous-with-delay figures, and step
+responses of F T (nominal and worst plant)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,8 +12,79 @@ import numpy as np
 from . import bounds as qb
 from .cost import drop_state
 from .family import I_X, C_row, velocity_loop_plants, torque_responses
-from .freqresp import feedback, max_real_eig
-from .prefilter import band_grid, bandwidth
+from .freqresp import feedback, max_real_eig, pad
+from .prefilter import band_grid, bandwidth, filtered_steps, step_metrics
+from ..controller.discrete import freqresp_z, tustin
+
+
+def zoh_batch(A, B, Ts):
+    """ZOH discretisation of a batch (N, n, n), (N, n) by the matrix exponential."""
+    from scipy.linalg import expm
+    N, n, _ = A.shape
+    M = np.zeros((N, n + 1, n + 1))
+    M[:, :n, :n] = A * Ts
+    M[:, :n, n] = B * Ts
+    E = expm(M)
+    return E[:, :n, :n], E[:, :n, n]
+
+
+class DigitalLoop:
+    """Discrete position loop of every plant (nominal last) at Ts: ZOH plant (closed velocity
+    loop x/omega_ref), n_delay shift states on the command, Tustin G (shared discrete.py).
+
+    States [x_plant, s_1..s_d, x_G]; s_1 <- u(k), plant input = s_d; e(k) = r(k) - x(k)."""
+
+    def __init__(self, casc, Ts, n_delay, prewarp_w=0.0):
+        self.Ts, self.nd, self.pw = Ts, int(n_delay), prewarp_w or None
+        self.Phi, self.Gam = zoh_batch(casc.A, casc.B_ref, Ts)
+        self.Cx = np.asarray(casc.C_x, float)
+
+    def closed_loop(self, G):
+        Ac, Bc, Cc, Dc = tustin(*G.ss(), self.Ts, self.pw)
+        N, n, _ = self.Phi.shape
+        d, m = self.nd, Ac.shape[0]
+        k = n + d + m
+        A = np.zeros((N, k, k))
+        Br = np.zeros((N, k))
+        A[:, :n, :n] = self.Phi
+        A[:, :n, n + d - 1] = self.Gam
+        A[:, n, :n] = -Dc[0, 0] * self.Cx
+        A[:, n, n + d:] = Cc[0]
+        Br[:, n] = Dc[0, 0]
+        for j in range(1, d):
+            A[:, n + j, n + j - 1] = 1.0
+        A[:, n + d:, :n] = -Bc[:, 0:1][None] * self.Cx[None, None, :]
+        A[:, n + d:, n + d:] = Ac
+        Br[:, n + d:] = Bc[:, 0]
+        return A, Br, pad(self.Cx, d + m)
+
+    def max_abs_eig(self, G):
+        return np.max(np.abs(np.linalg.eigvals(self.closed_loop(G)[0])), axis=-1)
+
+    def loop_freq(self, G, w, idx=-1):
+        """Open loop G(z) z^-d P_zoh(z) of plant idx at e^{j w Ts}."""
+        z = np.exp(1j * np.asarray(w, float) * self.Ts)
+        Gd = freqresp_z(*tustin(*G.ss(), self.Ts, self.pw), w, self.Ts)
+        Phi, Gam = self.Phi[idx], self.Gam[idx]
+        n = Phi.shape[0]
+        P = np.array([self.Cx @ np.linalg.solve(zi * np.eye(n) - Phi, Gam) for zi in z])
+        return Gd * z ** (-self.nd) * P
+
+    def steps(self, G, horizon):
+        """Unit-step responses x(k)/r of the closed loops, (N+1, K), k = 0..K-1."""
+        A, Br, C = self.closed_loop(G)
+        K = int(round(horizon / self.Ts)) + 1
+        x = np.zeros(Br.shape)
+        y = np.empty((A.shape[0], K))
+        for k in range(K):
+            y[:, k] = x @ C
+            x = np.einsum('nij,nj->ni', A, x) + Br
+        return y
+
+
+def digital_loop(casc, spec, fam) -> DigitalLoop:
+    return DigitalLoop(casc, spec['digital.Ts'], spec.delay_samples(fam.drive_delay),
+                       spec['digital.prewarp_w'])
 
 
 def margins(L, w):
@@ -61,9 +136,11 @@ def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
         L0 = torque_responses(fam, vbounds.w)[0][-1] * Gv.freq(vbounds.w)
         r['vel_bound_violation_db'] = float(qb.violation_db(vbounds.merged, L0).max())
     # position loop: each plant with its own closed velocity loop
-    casc = velocity_loop_plants(fam, Gv)
-    Cx = np.broadcast_to(casc.C_x, casc.A.shape[:2])
-    Ap = feedback(casc.A, casc.B_ref, Cx, G.ss())[0]
+    T_d = spec.loop_delay(fam.drive_delay)
+    r['loop_delay_ms'] = 1e3 * T_d
+    casc = velocity_loop_plants(fam, Gv, T_d)
+    Ae, Be, Cx = casc.delayed_ss()
+    Ap = feedback(Ae, Be, Cx, G.ss())[0]
     r['pos_max_real_eig'] = float(max_real_eig(Ap).max())
     Pw, Pd = casc.P_omega(wd), casc.P_d(wd)
     L = Pw * G.freq(wd)[None]
@@ -90,6 +167,33 @@ def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
     bw = bandwidth(F.freq(wb)[None] * Lb / (1 + Lb), wb) / (2 * np.pi)
     r['bw_min_hz'], r['bw_max_hz'], r['bw_nominal_hz'] = float(bw[:-1].min()), \
         float(bw[:-1].max()), float(bw[-1])
+    # digital loop at Ts
+    Ts = spec['digital.Ts']
+    dl = digital_loop(casc, spec, fam)
+    r['dig_Ts_ms'] = 1e3 * Ts
+    r['dig_delay_samples'] = dl.nd
+    r['dig_max_abs_eig'] = float(dl.max_abs_eig(G).max())
+    wz = wd[wd < 0.95 * np.pi / Ts]
+    Lc = casc.P_omega(wz)[-1:] * G.freq(wz)[None]
+    Lz = dl.loop_freq(G, wz)[None]
+    for tag, LL in (('cont', Lc), ('dig', Lz)):
+        gmn, pmn = margins(LL, wz)
+        r[f'nom_{tag}_max_T_db'] = float(qb.db(np.abs(LL / (1 + LL)).max()))
+        r[f'nom_{tag}_gm_db'], r[f'nom_{tag}_pm_deg'] = float(gmn[0]), float(pmn[0])
+    r['dig_dT_db'] = abs(r['nom_dig_max_T_db'] - r['nom_cont_max_T_db'])
+    r['dig_dGM_db'] = abs(r['nom_dig_gm_db'] - r['nom_cont_gm_db']) \
+        if np.isfinite(r['nom_dig_gm_db']) or np.isfinite(r['nom_cont_gm_db']) else 0.0
+    r['dig_dPM_deg'] = abs(r['nom_dig_pm_deg'] - r['nom_cont_pm_deg'])
+    yT = dl.steps(G, spec['digital.horizon'])
+    y = filtered_steps(F, yT, Ts, spec['digital.prewarp_w'])
+    os_pct, ts = step_metrics(y, Ts, spec['digital.settling_band'])
+    r['step_mm'] = 1e3 * spec['digital.step']
+    r['step_overshoot_pct'], r['step_settling_s'] = float(os_pct[-1]), float(ts[-1])
+    r['step_overshoot_worst_pct'] = float(os_pct[:-1].max())
+    r['step_settling_worst_s'] = float(ts[:-1].max())
+    r['step_worst_plant'] = int(np.argmax(ts[:-1]))
+    r['step_nominal_t'] = np.arange(y.shape[1]) * Ts
+    r['step_nominal_y'] = spec['digital.step'] * y[-1]
     if pbounds is not None:
         L0 = casc.P_omega(pbounds.w)[-1] * G.freq(pbounds.w)
         r['pos_bound_violation_db'] = float(qb.violation_db(pbounds.merged, L0).max())
@@ -106,6 +210,13 @@ def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
         'pos_stiffness': r['pos_stiff_worst_db'] <= tol,
         'tracking': max(r['track_over_up_db'], r['track_under_low_db']) <= r['track_tol_db'],
         'bandwidth_nominal': r['bw_nominal_hz'] >= spec['prefilter.bandwidth_min_hz'],
+        'dig_stable': r['dig_max_abs_eig'] < 1.0,
+        'dig_agree': r['dig_dT_db'] <= spec['digital.agree_db'] and
+        r['dig_dGM_db'] <= spec['digital.agree_db'] and r['dig_dPM_deg'] <= spec['digital.agree_deg'],
+        'step_nominal': r['step_overshoot_pct'] <= spec['digital.overshoot_max_pct'] and
+        r['step_settling_s'] <= spec['digital.settling_max'],
+        'step_family': r['step_overshoot_worst_pct'] <= spec['digital.overshoot_max_pct'] and
+        r['step_settling_worst_s'] <= spec['digital.settling_max'],
     }
     if vbounds is not None:
         r['pass']['vel_bounds'] = r['vel_bound_violation_db'] <= tol
