@@ -26,3 +26,11 @@ def ros_node(rclpy_session):
     yield node
     spinner.close()
     node.destroy_node()
+
+
+@pytest.fixture(scope='module')
+def params():
+    """Estimator parameters as the estimator node loads them (plant.yaml + estimator.yaml)."""
+    from eha_ros.core.batch import node_params
+    from eha_ros.core.estimator.params import SCHEMA
+    return node_params('estimator', SCHEMA)

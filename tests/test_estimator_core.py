@@ -17,14 +17,9 @@ from eha_ros.core.estimator.pva import PvaKF, pva_matrices
 from eha_ros.core.plant.linear import hydromech_abcd
 from eha_ros.core.plant.parameters import PlantParams
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-CONFIG = [os.path.join(ROOT, 'config', 'plant.yaml'),
-          os.path.join(ROOT, 'config', 'estimator.yaml')]
+CONFIG = [os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config', f)
+          for f in ('plant.yaml', 'estimator.yaml')]
 
-
-@pytest.fixture(scope='module')
-def params():
-    return load(SCHEMA, CONFIG)
 
 
 def hydro(params, leak_factor=2.0):

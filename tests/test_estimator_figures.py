@@ -2,24 +2,13 @@
 nonlinear plant with its default sensor noise + estimator + the Table 3.8 position PID closing
 the loop on the ESTIMATE (as the controller does on the bench; the estimate's errors then show
 up in the piston motion, which is what the truth comparison is about)."""
-import os
 
 import numpy as np
 import pytest
 
-from eha_ros.core.params import load
 from eha_ros.core.estimator import batch
 from eha_ros.core.estimator import fault_detector as fd
-from eha_ros.core.estimator.params import SCHEMA
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-CONFIG = [os.path.join(ROOT, 'config', 'plant.yaml'),
-          os.path.join(ROOT, 'config', 'estimator.yaml')]
-
-
-@pytest.fixture(scope='module')
-def params():
-    return load(SCHEMA, CONFIG)
 
 
 def rms(a):

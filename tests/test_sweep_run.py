@@ -1,10 +1,7 @@
 """Sweep runs: interrupted sessions keep finished points; the main job in batch; bad options."""
 import json
 import os
-import signal
 import subprocess
-import sys
-import time
 
 import numpy as np
 import pytest

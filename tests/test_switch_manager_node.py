@@ -316,6 +316,7 @@ def test_motor_fail_automatic_switch(run):
 
 def test_both_failed_safe_state_reported_no_oscillation(run):
     scenario_ran(run)
+    figures_valid(run, 'both failed')      # health verdicts need a stack that kept real time
     rec, d = run['rec'], run['data']
     t_f = (tick_of(run['responses']['fail_a']) - rec.seq0) * TS
     kinds = [e['kind'] for e in run['events']]

@@ -37,10 +37,16 @@ def node_command(name: str, config_dir: str | None = None, extra=(), files=None)
 class Stack:
     """Context manager: processes started in their own sessions, SIGINT then SIGKILL on exit."""
 
-    def __init__(self, nodes, config_dir=None, extra=None, log_dir=None, env=None):
+    def __init__(self, nodes, config_dir=None, extra=None, log_dir=None, env=None,
+                 lockstep: bool = False):
         self.nodes = list(nodes)
         self.config_dir = config_dir
-        self.extra = extra or {}
+        self.extra = {k: list(v) for k, v in (extra or {}).items()}
+        if lockstep:           # the plant steps per command and publishes /clock; others follow it
+            for name in self.nodes:
+                self.extra.setdefault(name, [])
+                self.extra[name] += (['-p', 'plant_sim:sim_node.lockstep:=true']
+                                     if name == 'plant_sim' else ['-p', 'use_sim_time:=true'])
         self.log_dir = log_dir
         self.env = dict(os.environ, **(env or {}))
         self.env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')

@@ -113,7 +113,8 @@ class Schema:
             raise ValueError(f'duplicate parameter in schema {self.node}')
 
     def __add__(self, other: 'Schema') -> 'Schema':
-        return Schema(self.node, list(self.params) + list(other.params))
+        """Shared parameters + a node's own: the result is named after the added (node) part."""
+        return Schema(other.node, list(self.params) + list(other.params))
 
     def defaults(self) -> dict:
         return {p.name: p.default for p in self.params if not p.required}

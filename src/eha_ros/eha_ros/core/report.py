@@ -10,14 +10,16 @@ import numpy as np
 
 
 def run_dir(base: str = 'out', name: str | None = None) -> str:
-    """A new folder out/<name or timestamp> (never reuses an existing one)."""
+    """A folder out/<name or timestamp>; an existing one is reused only while it holds no
+    summary.json (so a run never overwrites another run's report)."""
     stamp = name or datetime.datetime.now().strftime('run-%Y%m%d-%H%M%S')
     path = os.path.join(base, stamp)
     i = 1
-    while os.path.exists(path):
+    while os.path.exists(os.path.join(path, 'summary.json')) or \
+            (os.path.exists(path) and not os.path.isdir(path)):
         path = os.path.join(base, f'{stamp}-{i}')
         i += 1
-    os.makedirs(path)
+    os.makedirs(path, exist_ok=True)
     return path
 
 

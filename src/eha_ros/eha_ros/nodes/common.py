@@ -15,8 +15,9 @@ from typing import Callable
 from ..core.cli import guarded
 from ..core.params import ParamError, Schema, ROS_BUILTINS, load, parse_ros_args
 
-# Sensor-data style QoS for the 1 kHz streams: keep the newest, never block the sender.
-STREAM_DEPTH = 10
+# QoS of the 1 kHz streams: reliable, a queue deep enough that a recorder or monitor that
+# falls behind for a while (lock-step bursts, start-up) does not lose samples.
+STREAM_DEPTH = 100
 
 
 def stream_qos():
@@ -31,6 +32,12 @@ def latched_qos():
     return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       history=HistoryPolicy.KEEP_LAST,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def clock_s(node) -> float:
+    """The node's clock in seconds: /clock time under use_sim_time (lock-step), else system
+    time. Watchdogs and staleness use it, so they count plant time in lock-step."""
+    return node.get_clock().now().nanoseconds * 1e-9
 
 
 def declare_and_validate(node, schema: Schema, params: dict) -> dict:

@@ -14,7 +14,7 @@ from ..core.controller.params import SCHEMA
 from ..core.controller.position import PositionController
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import declare_and_validate, latched_qos, run, stream_qos
+from .common import clock_s, declare_and_validate, latched_qos, run, stream_qos
 
 
 def drive_mismatch(p: dict) -> float:
@@ -61,6 +61,9 @@ def make_node(params: dict):
             self.last_speed = 0.0
             self.active_channel = None
             self.pending = deque(maxlen=2000)   # tick-locked references waiting for their tick
+            self.ref_seq = 0                    # newest tick-locked reference seen
+            self.held = deque()                 # lock-step: estimates waiting for their reference
+            self.lockstep = bool(self.get_parameter('use_sim_time').value)
             self.exec_time = RingStats()
             self.cmd = ActuatorCommand()
             qos = stream_qos()
@@ -74,6 +77,10 @@ def make_node(params: dict):
             # without a second 1 kHz callback in the executor
             self.create_timer(max(self.Ts, 0.5 * self.watchdog_s), self.watchdog)
             self.create_timer(p['control.diagnostics_period'], self.publish_diagnostics)
+            if self.lockstep:      # wall-clock timer: sim time stands still while we wait
+                from rclpy.clock import Clock, ClockType
+                self.create_timer(0.01, self.release_held,
+                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
             self.get_logger().info(
                 f'controller: QFT G (order {len(p["position_controller.den"]) - 1}) and F at '
                 f'{1 / self.Ts:.0f} Hz, Tustin{" prewarped" if prewarp else ""}, '
@@ -82,8 +89,11 @@ def make_node(params: dict):
         def on_reference(self, msg):
             """seq 0: apply now. seq k > 0: a tick-locked source (the sweep) -> apply when the
             estimate of tick k is handled, so reference timing does not depend on DDS order."""
+            if msg.seq > 0:
+                self.ref_seq = max(self.ref_seq, msg.seq)
             if msg.seq > 0 and msg.seq > self.last_seq:
                 self.pending.append((msg.seq, msg.position))
+                self.release_held()
                 return
             self.apply_reference(msg.position)
 
@@ -106,8 +116,23 @@ def make_node(params: dict):
             self.active_channel = msg.active_channel
 
         def on_estimate(self, msg):
+            """Lock-step with a tick-locked reference source (the sweep): estimate(k) waits for
+            reference(k), so the loop (and its results) do not depend on who runs faster."""
+            if self.lockstep and self.ref_seq > 0 and msg.seq > self.ref_seq:
+                self.held.append((time.monotonic(), msg))
+                return
+            self.process_estimate(msg)
+
+        def release_held(self, force=False):
+            while self.held and (force or self.held[0][1].seq <= self.ref_seq or
+                                 time.monotonic() - self.held[0][0] > 0.05):
+                if not force and self.held[0][1].seq > self.ref_seq:
+                    self.c.bump('reference_wait_timeouts')
+                self.process_estimate(self.held.popleft()[1])
+
+        def process_estimate(self, msg):
             t0 = time.perf_counter()
-            now = time.monotonic()
+            now = clock_s(self)
             self.last_seq = msg.seq
             while self.pending and self.pending[0][0] <= msg.seq:
                 self.apply_reference(self.pending.popleft()[1])
@@ -144,14 +169,14 @@ def make_node(params: dict):
             """No fresh estimate for watchdog_ticks: command zero speed (repeated), report."""
             if self.last_good is None:
                 return
-            if time.monotonic() - self.last_good > self.watchdog_s:
+            if clock_s(self) - self.last_good > self.watchdog_s:
                 if not self.tripped:
                     self.tripped = True
                     self.c.bump('watchdog_trips')
                     self.get_logger().warning(
                         f'no fresh estimate for {self.watchdog_s * 1e3:.0f} ms: commanding zero '
                         f'motor speed')
-                self.send(self.last_seq, 0.0, False)
+                self.send(0, 0.0, False)      # seq 0: answers no estimate (contract)
 
         def publish_diagnostics(self):
             ex = self.exec_time.summary()

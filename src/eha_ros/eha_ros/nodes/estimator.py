@@ -17,7 +17,7 @@ from ..core.estimator.fault_detector import NAMES
 from ..core.estimator.params import SCHEMA
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import declare_and_validate, run, stream_qos
+from .common import clock_s, declare_and_validate, run, stream_qos
 
 STATE_QUEUE_DEPTH = 20      # states (20 ms at 1 kHz): rides out short stalls without a long backlog
 
@@ -58,7 +58,7 @@ def make_node(params: dict):
 
         def on_state(self, msg):
             t0 = time.perf_counter()
-            now = time.monotonic()
+            now = clock_s(self)
             if self.last_arrival is not None:
                 self.period.add(now - self.last_arrival)
             self.last_arrival = now
@@ -89,7 +89,7 @@ def make_node(params: dict):
         def on_timer(self):
             if self.last_arrival is None:
                 return
-            if time.monotonic() - self.last_arrival <= self.stale_time:
+            if clock_s(self) - self.last_arrival <= self.stale_time:
                 return
             if not self.stale:
                 self.stale = True

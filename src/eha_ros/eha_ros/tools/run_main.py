@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 from ..core.cli import UsageError, guarded
@@ -132,13 +133,11 @@ def run_nodes(args, over: dict, out: str) -> dict:
     nodes = ['plant_sim', 'estimator', 'controller']
     if os.path.exists(os.path.join(args.config, 'switch_manager.yaml')):
         nodes.append('switch_manager')
-    extra = {}
-    if args.mode == 'lockstep':
-        extra['plant_sim'] = ['-p', 'plant_sim:sim_node.lockstep:=true']
     logs = os.path.join(out, 'logs')
-    stack = Stack(nodes, args.config, extra, log_dir=logs).start()
+    stack = Stack(nodes, args.config, log_dir=logs, lockstep=args.mode == 'lockstep').start()
     print(f'run: started {", ".join(nodes)} (logs in {logs}/)', flush=True)
-    sweep_args = ['-p', f'sweep:sweep.out_dir:={os.path.dirname(out) or "."}',
+    sweep_args = ['-p', 'use_sim_time:=true'] if args.mode == 'lockstep' else []
+    sweep_args += ['-p', f'sweep:sweep.out_dir:={os.path.dirname(out) or "."}',
                   '-p', f'sweep:sweep.run_name:={os.path.basename(out)}']
     for k, v in over.items():
         sweep_args += ['-p', f'sweep:{k}:={v}']
@@ -146,20 +145,28 @@ def run_nodes(args, over: dict, out: str) -> dict:
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                              start_new_session=True)
     lines = []
-    try:
-        deadline = time.monotonic() + args.timeout
+
+    def reader():                      # the sweep's output, echoed as it measures
         for line in sweep.stdout:
             lines.append(line)
             text = line.split(']: ', 1)[-1].rstrip()
             if 'Hz:' in text or 'started' in text or 'aborted' in text:
                 print('  ' + text, flush=True)
+    threading.Thread(target=reader, daemon=True).start()
+    try:
+        deadline = time.monotonic() + args.timeout
+        while sweep.poll() is None:
+            time.sleep(0.5)
             dead = stack.dead()
             if dead:
-                raise UsageError(f'node(s) died during the run: {dead}; see {logs}/')
+                os.killpg(sweep.pid, signal.SIGINT)
+                sweep.wait(timeout=60)
+                tails = {n: stack.stop()[n][1].strip().splitlines()[-1:] for n in dead}
+                raise UsageError(f'node(s) died during the run: {dead} {tails}; see {logs}/')
             if time.monotonic() > deadline:
                 print(f'run: timeout after {args.timeout:.0f} s: stopping the sweep', flush=True)
                 os.killpg(sweep.pid, signal.SIGINT)
-        sweep.wait(timeout=60)
+                sweep.wait(timeout=60)
     except KeyboardInterrupt:
         print('run: interrupted: keeping every finished frequency', flush=True)
         os.killpg(sweep.pid, signal.SIGINT)

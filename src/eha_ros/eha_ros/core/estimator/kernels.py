@@ -121,3 +121,19 @@ def warm_up():
     G = np.zeros((3, 1))
     predict(x, P, F, G, np.zeros(1), np.eye(3), np.empty((3, 3)))
     update(x, P, np.eye(1, 3), np.eye(1), np.zeros(1), np.zeros(1), np.zeros((1, 1)))
+
+
+class StateView:
+    """Position, velocity and position variance of a filter whose x = [x, x_dot, ...], P."""
+
+    @property
+    def position(self) -> float:
+        return float(self.x[0])
+
+    @property
+    def velocity(self) -> float:
+        return float(self.x[1])
+
+    @property
+    def position_variance(self) -> float:
+        return float(self.P[0, 0])

@@ -110,7 +110,7 @@ def friction_estimate(omega: float, p_D: float | None, A_p: float, D_p: float, F
 LEAK_UNIT = 1e-12      # m^3/(s Pa): unit of the leakage-coefficient correction state
 
 
-class ModelKF:
+class ModelKF(kernels.StateView):
     """Discrete Kalman filter of eq. 4.35 (predict eq. 4.1-4.2, Joseph update eq. 4.4-4.6).
 
     States [x, xdot, p_D] then, optionally, the sensor's Gauss-Markov offset b (``gm`` =
@@ -211,20 +211,8 @@ class ModelKF:
         return y, float(self.H[0] @ self.P @ self.H[0] + self.R[0, 0])
 
     @property
-    def position(self) -> float:
-        return float(self.x[0])
-
-    @property
-    def velocity(self) -> float:
-        return float(self.x[1])
-
-    @property
     def pressure_diff(self) -> float:
         return float(self.x[2])
-
-    @property
-    def position_variance(self) -> float:
-        return float(self.P[0, 0])
 
     @property
     def leak_correction(self) -> float:

@@ -17,7 +17,7 @@ def pva_matrices(Ts: float, W: float):
     return F, Q
 
 
-class PvaKF:
+class PvaKF(kernels.StateView):
     """PVA filter: H = [1 0 0] (eq. 4.31), R (eq. 4.33), P0 (eq. 4.34), Joseph update."""
 
     def __init__(self, Ts: float, W: float, R: float, p0_diag=(1e-6, 1e-2, 1e2)):
@@ -49,17 +49,5 @@ class PvaKF:
         return z_pos - float(self.x[0]), float(self.P[0, 0] + self.R[0, 0])
 
     @property
-    def position(self) -> float:
-        return float(self.x[0])
-
-    @property
-    def velocity(self) -> float:
-        return float(self.x[1])
-
-    @property
     def acceleration(self) -> float:
         return float(self.x[2])
-
-    @property
-    def position_variance(self) -> float:
-        return float(self.P[0, 0])

@@ -169,7 +169,10 @@ class SweepSession:
         segs = getattr(self.plan, 'segments', [])
         if complete is None:
             complete = self.aborted is None and len(self.points) == len(segs)
-        reason = reason or self.aborted or ('complete' if complete else 'interrupted')
+        if reason is None and self.aborted is None and not complete:
+            reason = (f'{len(self.points)} of {len(segs)} frequencies measured (the others had '
+                      f'too little data)')
+        reason = reason or self.aborted or 'complete'
         self.complete, self.reason = complete, reason
         summary = self._write_summary(complete, reason)
         cols = {'tick': np.arange(self.n), **self.data}
