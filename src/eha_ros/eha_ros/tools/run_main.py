@@ -1,8 +1,9 @@
 """The main job (scripts/run): the simulated EHA stack with a stepped-sine sweep and a report.
 
-realtime (default): plant_sim, estimator, controller (and switch_manager) as separate
-processes over DDS at 1 kHz, the sweep node driving them; lockstep: the same with the plant
-stepping only when command(k) arrived; batch: the same core objects in one process.
+lockstep (default): plant_sim, estimator, controller and switch_manager as separate processes
+over DDS, the plant stepping when command(k) has arrived, the sweep node driving them;
+realtime: the same on the wall clock at 1 kHz (on a 2-core machine the Python DDS stack
+cannot hold 1 kHz, see README); batch: the same core objects in one process.
 Every mode writes out/<run>/summary.json, data.csv, bode.png (and logs/ for the node modes).
 """
 from __future__ import annotations
@@ -29,9 +30,10 @@ def parse(argv):
         description='Run the simulated EHA stack with a stepped-sine sweep (thesis Fig. 4.51) '
                     'and write a report (summary.json, data.csv, bode.png) under out/<run>/. '
                     'Sweep defaults come from config/sweep.yaml (1-15 Hz, 1 mm).')
-    ap.add_argument('--mode', choices=MODES, default='realtime',
-                    help='realtime: nodes over DDS at 1 kHz (default); lockstep: plant waits '
-                         'for each command; batch: core objects in one process, no DDS')
+    ap.add_argument('--mode', choices=MODES, default='lockstep',
+                    help='lockstep (default): nodes over DDS, the plant waits for each command; '
+                         'realtime: nodes over DDS on the wall clock at 1 kHz; batch: core '
+                         'objects in one process, no DDS')
     ap.add_argument('--amplitude-mm', type=float, help='sine amplitude [mm]')
     ap.add_argument('--offset-mm', type=float, help='centre position [mm]')
     ap.add_argument('--start-hz', type=float, help='first frequency [Hz]')
