@@ -78,10 +78,10 @@ def python_module(module: str, *args) -> list:
 class Spinner:
     """Spin an rclpy node in a background thread for the duration of a test."""
 
-    def __init__(self, node):
+    def __init__(self, node, executor=None):
         from rclpy.executors import SingleThreadedExecutor
         self.node = node
-        self.executor = SingleThreadedExecutor()
+        self.executor = executor or SingleThreadedExecutor()
         self.executor.add_node(node)
         self._stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)

@@ -8,7 +8,6 @@ import json
 import math
 import os
 import re
-import threading
 import time
 
 import numpy as np
@@ -36,12 +35,7 @@ class EventsSpinner(Spinner):
 
     def __init__(self, node):
         from eha_ros.nodes.common import make_executor
-        self.node = node
-        self.executor = make_executor()
-        self.executor.add_node(node)
-        self._stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        super().__init__(node, make_executor())
 
 
 def ref_at(t):
