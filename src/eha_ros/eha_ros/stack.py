@@ -11,17 +11,9 @@ import subprocess
 import sys
 import time
 
+from .core.batch import NODE_FILES
 from .core.params import default_config_dir
 
-# node -> params files in config/ (later files override earlier ones)
-NODE_FILES = {
-    'plant_sim': ['plant.yaml', 'plant_sim.yaml'],
-    'estimator': ['plant.yaml', 'estimator.yaml'],
-    'controller': ['plant.yaml', 'controller.yaml', 'controller_node.yaml'],
-    'switch_manager': ['plant.yaml', 'switch_manager.yaml'],
-    'sweep': ['plant.yaml', 'sweep.yaml'],
-    'hardware_bridge': ['plant.yaml', 'hardware_bridge.yaml'],
-}
 
 
 def node_command(name: str, config_dir: str | None = None, extra=(), files=None) -> list[str]:

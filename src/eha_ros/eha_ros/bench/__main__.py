@@ -4,29 +4,19 @@ from __future__ import annotations
 import argparse
 import datetime
 import importlib
-import json
 import os
 import pkgutil
 import platform
 import sys
 
 from ..core.cli import UsageError, guarded
+from ..core.report import write_json
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def available() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules([HERE]) if not m.name.startswith('_'))
-
-
-def write_json(path: str, data: dict):
-    """Atomic write: a reader never sees half a file."""
-    os.makedirs(os.path.dirname(path) or '.', exist_ok=True)
-    tmp = path + '.tmp'
-    with open(tmp, 'w') as fh:
-        json.dump(data, fh, indent=2, sort_keys=True)
-        fh.write('\n')
-    os.replace(tmp, path)
 
 
 def main(argv=None) -> int:
@@ -50,7 +40,7 @@ def main(argv=None) -> int:
                        'command': 'scripts/bench ' + ' '.join(argv),
                        'timestamp': datetime.datetime.now(datetime.timezone.utc).isoformat()})
         path = os.path.join(args.out, f'{args.name}.json')
-        write_json(path, result)
+        write_json(path, result, sort_keys=True)
         for key in sorted(result):
             print(f'{key}: {result[key]}')
         print(f'bench {args.name}: wrote {path}')

@@ -9,17 +9,21 @@ from dataclasses import dataclass
 
 from .params import default_config_dir, load
 
-# the files each node reads (as eha_ros.stack.NODE_FILES, kept here so core needs no rclpy)
-FILES = {
+# node -> params files in config/ (later files override earlier ones); eha_ros.stack starts the
+# node processes with the same files
+NODE_FILES = {
     'plant_sim': ['plant.yaml', 'plant_sim.yaml'],
     'estimator': ['plant.yaml', 'estimator.yaml'],
     'controller': ['plant.yaml', 'controller.yaml', 'controller_node.yaml'],
+    'switch_manager': ['plant.yaml', 'switch_manager.yaml'],
+    'sweep': ['plant.yaml', 'sweep.yaml'],
+    'hardware_bridge': ['plant.yaml', 'hardware_bridge.yaml'],
 }
 
 
 def node_params(node: str, schema, config_dir: str | None = None, overrides=None) -> dict:
     config_dir = config_dir or default_config_dir()
-    return load(schema, [os.path.join(config_dir, f) for f in FILES[node]], overrides or {},
+    return load(schema, [os.path.join(config_dir, f) for f in NODE_FILES[node]], overrides or {},
                 node=node)
 
 

@@ -23,11 +23,12 @@ def run_dir(base: str = 'out', name: str | None = None) -> str:
     return path
 
 
-def write_json(path: str, data) -> None:
+def write_json(path: str, data, sort_keys: bool = False) -> None:
     """Atomic: write a temporary file then rename, so readers never see half a file."""
+    os.makedirs(os.path.dirname(path) or '.', exist_ok=True)
     tmp = path + '.tmp'
     with open(tmp, 'w') as fh:
-        json.dump(data, fh, indent=2, default=_jsonable)
+        json.dump(data, fh, indent=2, default=_jsonable, sort_keys=sort_keys)
         fh.write('\n')
     os.replace(tmp, path)
 

@@ -25,12 +25,12 @@ MARGIN_TICKS = 30           # data of a tick is complete this many ticks after i
 
 def model_overlay(p: dict):
     """Closed-loop model from the controller YAML, or None if it cannot be loaded."""
-    from ..core.controller.params import NODE as CONTROLLER
+    from ..core.controller.params import TF
+    from ..core.params import Schema
     from ..core.sweep.model import closed_loop
     path = p['sweep.controller_file'] or os.path.join(default_config_dir(), 'controller.yaml')
-    tf_keys = [q for q in CONTROLLER.params if q.name.endswith(('.num', '.den'))]
     try:
-        c = load(type(CONTROLLER)('controller', tf_keys), [path])
+        c = load(Schema('controller', TF), [path])
     except Exception:
         return None, path
     G = (c['position_controller.num'], c['position_controller.den'])

@@ -63,12 +63,11 @@ def main(argv=None) -> int:
 
 
 def run(args) -> int:
-    from ..core.params import load
+    from ..core.batch import node_params
     from ..core.sweep.params import SCHEMA, build_plan
     over = sweep_overrides(args)
     # validate the sweep here, so a bad option is one line before anything starts
-    sweep_p = load(SCHEMA, [os.path.join(args.config, f) for f in ('plant.yaml', 'sweep.yaml')],
-                   {f'sweep:{k}': v for k, v in over.items()}, node='sweep')
+    sweep_p = node_params('sweep', SCHEMA, args.config, {f'sweep:{k}': v for k, v in over.items()})
     plan = build_plan(sweep_p)
     out = run_dir(args.out, args.name)
     print(f'run: {args.mode}, stepped sine {sweep_p["sweep.start_hz"]:g}-'
