@@ -2,7 +2,8 @@
 from setuptools import find_packages, setup
 
 PACKAGE = 'eha_ros'
-NODES = ['plant_sim', 'hardware_bridge', 'estimator', 'controller', 'switch_manager', 'sweep']
+NODES = ['plant_sim', 'hardware_bridge', 'estimator', 'controller', 'switch_manager', 'sweep',
+         'recorder', 'eha_loop']
 
 setup(
     name=PACKAGE,

@@ -106,6 +106,13 @@ def make_executor():
         return SingleThreadedExecutor()
 
 
+def node_base():
+    """Base class of every EHA node (rclpy Node; in a composed process it also routes topics
+    between co-located nodes without DDS, see eha_ros.nodes.compose)."""
+    from rclpy.node import Node
+    return Node
+
+
 def node_kwargs() -> dict:
     """Keyword arguments for rclpy Node so params-file keys show up as overrides."""
     return dict(automatically_declare_parameters_from_overrides=False,

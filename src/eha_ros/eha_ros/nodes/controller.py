@@ -14,7 +14,7 @@ from ..core.controller.params import SCHEMA
 from ..core.controller.position import PositionController
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import clock_s, declare_and_validate, latched_qos, run, stream_qos
+from .common import clock_s, declare_and_validate, latched_qos, node_base, run, stream_qos
 
 
 def drive_mismatch(p: dict) -> float:
@@ -32,7 +32,7 @@ def drive_mismatch(p: dict) -> float:
 
 
 def make_node(params: dict):
-    from rclpy.node import Node
+    Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, PositionEstimate, PositionReference,
                               RedundancyStatus)
 

@@ -17,13 +17,13 @@ from ..core.estimator.fault_detector import NAMES
 from ..core.estimator.params import SCHEMA
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import clock_s, declare_and_validate, run, stream_qos
+from .common import clock_s, declare_and_validate, node_base, run, stream_qos
 
 STATE_QUEUE_DEPTH = 20      # states (20 ms at 1 kHz): rides out short stalls without a long backlog
 
 
 def make_node(params: dict):
-    from rclpy.node import Node
+    Node = node_base()
     from eha_msgs.msg import ActuatorState, PositionEstimate
 
     class EstimatorNode(Node):

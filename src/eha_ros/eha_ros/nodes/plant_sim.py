@@ -16,7 +16,7 @@ from ..core.plant import EhaPlant
 from ..core.plant_sim_params import SCHEMA
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import declare_and_validate, latched_qos, run, stream_qos
+from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
 
 
 class CommandGate:
@@ -51,7 +51,7 @@ class CommandGate:
 
 
 def make_node(params: dict):
-    from rclpy.node import Node
+    Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, ExternalLoad,
                               PlantTruth)
     from eha_msgs.srv import InjectFault

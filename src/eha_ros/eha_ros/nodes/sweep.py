@@ -18,7 +18,7 @@ from ..core.report import run_dir
 from ..core.sweep.params import SCHEMA, build_plan
 from ..core.sweep.session import SweepSession, print_table
 from . import diag
-from .common import declare_and_validate, run, stream_qos
+from .common import declare_and_validate, node_base, run, stream_qos
 
 MARGIN_TICKS = 30           # data of a tick is complete this many ticks after its state
 
@@ -39,7 +39,7 @@ def model_overlay(p: dict):
 
 
 def make_node(params: dict):
-    from rclpy.node import Node
+    Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, ActuatorState, PlantTruth, PositionEstimate,
                               PositionReference)
 

@@ -20,7 +20,7 @@ from ..core.redundancy import ChannelSample, EventLog, SwitchManager
 from ..core.redundancy.params import SCHEMA, check
 from ..core.stats import Counters
 from . import diag
-from .common import declare_and_validate, latched_qos, run, stream_qos
+from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
 
 
 def _finite(*values) -> bool:
@@ -28,7 +28,7 @@ def _finite(*values) -> bool:
 
 
 def make_node(params: dict):
-    from rclpy.node import Node
+    Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, PositionEstimate,
                               RedundancyStatus)
     from eha_msgs.srv import SwitchChannel

@@ -1,0 +1,12 @@
+"""eha_loop node (not built yet: issue 10)."""
+import sys
+
+from .common import not_implemented
+
+
+def main() -> int:
+    return not_implemented('eha_loop', 10)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
