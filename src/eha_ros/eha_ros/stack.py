@@ -16,6 +16,14 @@ from .core.params import default_config_dir
 
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (all threads), from /proc."""
+    with open(f'/proc/{pid}/stat') as fh:
+        fields = fh.read().rsplit(')', 1)[1].split()
+    ticks = os.sysconf('SC_CLK_TCK')
+    return (int(fields[11]) + int(fields[12])) / ticks
+
+
 def node_command(name: str, config_dir: str | None = None, extra=(), files=None) -> list[str]:
     """Executable (next to this interpreter, i.e. in the venv) + --ros-args with params files."""
     config_dir = config_dir or default_config_dir()
@@ -26,12 +34,38 @@ def node_command(name: str, config_dir: str | None = None, extra=(), files=None)
     return args + list(extra)
 
 
+# the 1 kHz loop: what eha_loop can host in one process (plant side first)
+LOOP_NODES = ('plant_sim', 'hardware_bridge', 'estimator', 'controller', 'switch_manager')
+
+
+def composed_command(nodes, config_dir: str | None = None, extra=None) -> list[str]:
+    """eha_loop hosting ``nodes`` (plant side + loop nodes) with the union of their params
+    files; per-node ``extra`` arguments (-p name:key:=value form) are passed through."""
+    plant = 'bridge' if 'hardware_bridge' in nodes else 'sim'
+    others = [n for n in nodes if n not in ('plant_sim', 'hardware_bridge')]
+    files: list[str] = []
+    for n in nodes:
+        files += [f for f in NODE_FILES[n] if f not in files]
+    args = ['--plant', plant, '--nodes', ','.join(others)]
+    cmd = node_command('eha_loop', config_dir, files=files)
+    cmd[1:1] = args
+    for n in nodes:
+        cmd += list((extra or {}).get(n, ()))
+    return cmd
+
+
 class Stack:
-    """Context manager: processes started in their own sessions, SIGINT then SIGKILL on exit."""
+    """Context manager: processes started in their own sessions, SIGINT then SIGKILL on exit.
+
+    composed=True runs the loop nodes among ``nodes`` (LOOP_NODES) as one eha_loop process
+    (in-process topics between them; real time only), listed as 'eha_loop' in procs."""
 
     def __init__(self, nodes, config_dir=None, extra=None, log_dir=None, env=None,
-                 lockstep: bool = False):
+                 lockstep: bool = False, composed: bool = False):
+        if composed and lockstep:
+            raise ValueError('lock-step runs every node as its own process')
         self.nodes = list(nodes)
+        self.composed = [n for n in self.nodes if n in LOOP_NODES] if composed else []
         self.config_dir = config_dir
         self.extra = {k: list(v) for k, v in (extra or {}).items()}
         if lockstep:           # the plant steps per command and publishes /clock; others follow it
@@ -45,9 +79,18 @@ class Stack:
         self.procs: dict[str, subprocess.Popen] = {}
         self._logs = []
 
-    def start(self):
+    def commands(self) -> dict:
+        """{process name: command line} of what start() runs."""
+        cmds = {}
+        if self.composed:
+            cmds['eha_loop'] = composed_command(self.composed, self.config_dir, self.extra)
         for name in self.nodes:
-            cmd = node_command(name, self.config_dir, self.extra.get(name, ()))
+            if name not in self.composed:
+                cmds[name] = node_command(name, self.config_dir, self.extra.get(name, ()))
+        return cmds
+
+    def start(self):
+        for name, cmd in self.commands().items():
             if self.log_dir:
                 os.makedirs(self.log_dir, exist_ok=True)
                 log = open(os.path.join(self.log_dir, f'{name}.log'), 'w')

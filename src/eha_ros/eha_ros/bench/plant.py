@@ -93,7 +93,7 @@ def node_realtime(duration: float = 10.0) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
     from eha_msgs.msg import ActuatorCommand, ActuatorState
     from ..stack import Stack
-    from ._nodes import cpu_seconds
+    from ..stack import cpu_seconds
 
     stack = Stack(['plant_sim']).start()
     proc = stack.procs['plant_sim']

@@ -34,3 +34,32 @@ class Counters(dict):
 
     def bump(self, name: str, by: int = 1):
         self[name] = self.get(name, 0) + by
+
+
+class Histogram:
+    """Whole-run distribution of a time (s) in fixed bins, for percentiles over long runs."""
+
+    def __init__(self, bin_s: float = 10e-6, top_s: float = 0.05):
+        self.bin = bin_s
+        self.counts = np.zeros(int(round(top_s / bin_s)) + 1, dtype=np.int64)   # last: overflow
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, value: float):
+        i = min(int(value / self.bin), len(self.counts) - 1)
+        self.counts[i] += 1
+        self.n += 1
+        if value > self.max:
+            self.max = value
+
+    def percentile(self, q: float) -> float:
+        """Upper edge of the bin holding the q-th percentile (the max if it is in the overflow)."""
+        if self.n == 0:
+            return 0.0
+        i = int(np.searchsorted(np.cumsum(self.counts), q / 100.0 * self.n))
+        return self.max if i >= len(self.counts) - 1 else min((i + 1) * self.bin, self.max)
+
+    def fraction_below(self, limit: float) -> float:
+        if self.n == 0:
+            return 0.0
+        return float(self.counts[:int(limit / self.bin)].sum()) / self.n

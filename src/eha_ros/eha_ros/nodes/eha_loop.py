@@ -1,11 +1,82 @@
-"""eha_loop node (not built yet: issue 10)."""
+"""eha_loop: the 1 kHz loop nodes composed in one process (see eha_ros.nodes.compose).
+
+Usage: eha_loop [--plant sim|bridge] [--nodes a,b,...] --ros-args --params-file F ...
+
+Each node is the same class as its standalone executable, with its own name, parameters
+(its sections of the params files), services and /diagnostics; the topics between them are
+delivered in-process, in the plant's (or bridge's) loop thread, so state(k) -> estimate(k)
+-> command(k) completes within the tick. Everything else on the graph (sweep, recorder,
+monitors, tests) sees the usual topics over DDS.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
 import sys
 
-from .common import not_implemented
+from ..core.cli import UsageError, guarded
+from ..core.params import load, parse_ros_args
+from . import common
+
+LOOP_NODES = ('estimator', 'controller', 'switch_manager')
+PLANTS = {'sim': 'plant_sim', 'bridge': 'hardware_bridge'}
+GIL_SWITCH_INTERVAL = 2e-4   # s: the loop thread gets the GIL back quickly from other threads
 
 
-def main() -> int:
-    return not_implemented('eha_loop', 10)
+def parse(argv):
+    ours, ros = argv, []
+    if '--ros-args' in argv:
+        i = argv.index('--ros-args')
+        ours, ros = argv[:i], argv[i:]
+    ap = argparse.ArgumentParser(prog='eha_loop', description=__doc__.splitlines()[0])
+    ap.add_argument('--plant', choices=sorted(PLANTS), default='sim',
+                    help='plant side: the simulator (plant_sim) or the drive (hardware_bridge)')
+    ap.add_argument('--nodes', default=','.join(LOOP_NODES),
+                    help='co-located nodes besides the plant side (default: %(default)s)')
+    args = ap.parse_args(ours)
+    names = [PLANTS[args.plant]] + [n for n in args.nodes.split(',') if n]
+    known = set(PLANTS.values()) | set(LOOP_NODES)
+    for n in names:
+        if n not in known:
+            raise UsageError(f'--nodes: unknown node {n!r}: expected some of '
+                             f'{", ".join(LOOP_NODES)}')
+    return names, ros
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv if argv is None else argv)
+
+    def body() -> int:
+        names, ros = parse(argv[1:])
+        files, overrides, node_name, namespace = parse_ros_args(ros)
+        if node_name:
+            raise UsageError('-r __node:= would give every co-located node the same name; '
+                             'rename single nodes with -r <node>:__node:=<name>')
+        modules = {n: importlib.import_module(f'{__package__}.{n}') for n in names}
+        params = {n: load(modules[n].SCHEMA, files, overrides, node=n, namespace=namespace)
+                  for n in names}
+        if params[names[0]].get('sim_node.lockstep'):
+            raise UsageError('lock-step runs each node as its own process '
+                             '(scripts/run_stack --mode lockstep); eha_loop is real time only')
+        sys.setswitchinterval(GIL_SWITCH_INTERVAL)
+
+        def make_nodes():
+            from .compose import Bus
+            bus = Bus()
+            common._BUS = bus
+            try:
+                nodes = [modules[n].make_node(params[n]) for n in names]
+            finally:
+                common._BUS = None
+            bus.finalize()
+            nodes[0].get_logger().info(
+                f'eha_loop: {", ".join(names)} in one process; in-process topics: '
+                f'{", ".join(bus.local_topics())}')
+            return nodes
+
+        return common.spin([argv[0]] + ros, make_nodes)
+
+    return guarded('eha_loop', body)
 
 
 if __name__ == '__main__':

@@ -14,7 +14,7 @@ import time
 
 from ..core.plant import EhaPlant
 from ..core.plant_sim_params import SCHEMA
-from ..core.stats import Counters, RingStats
+from ..core.stats import Counters, Histogram, RingStats
 from . import diag
 from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
 
@@ -72,6 +72,8 @@ def make_node(params: dict):
                                     self.p['sim_node.max_abs_load'], self.c)
             self.period = RingStats()
             self.exec_time = RingStats()
+            self.latency = Histogram()        # state(k) published -> command(k) received
+            self.state_time = None            # perf_counter when state(self.k) went out
             self.lockstep = self.p['sim_node.lockstep']
             self.cmd_stale = False
             self.state_msg, self.truth_msg = ActuatorState(), PlantTruth()
@@ -110,6 +112,8 @@ def make_node(params: dict):
 
         # ---- inputs (executor thread) ----
         def on_command(self, msg):
+            if msg.seq == self.k and self.gate.cmd_seq != self.k and self.state_time:
+                self.latency.add(time.perf_counter() - self.state_time)
             self.gate.command(msg.motor_speed_ref, msg.seq, time.monotonic())
             if self.lockstep and msg.seq == self.k:
                 self.tick()
@@ -196,7 +200,10 @@ def make_node(params: dict):
                 valve[i] = bool(m.valve_open[i] > 0.5)      # fractions -> open/closed
                 enabled[i] = bool(m.drive_enabled[i])
                 fault[i] = bool(m.drive_fault[i])
+            self.state_time = time.perf_counter()
             self.pub_state.publish(s)
+            if not self.pub_truth.get_subscription_count():
+                return                            # nobody listens: skip building the truth
             t = self.truth_msg
             t.header.stamp = stamp
             t.seq = self.k
@@ -244,7 +251,8 @@ def make_node(params: dict):
                     self.period.add((now - last) * 1e-9)
                 last = now
                 try:
-                    self.tick()
+                    with self.callback_lock:      # composed process: one callback at a time
+                        self.tick()
                 except Exception as err:  # never die silently in the loop thread
                     self.c.bump('tick_errors')
                     self.get_logger().error(f'tick failed: {err!r}')
@@ -263,7 +271,10 @@ def make_node(params: dict):
                       'period_mean_s': per['mean'], 'period_p99_s': per['p99'],
                       'period_max_s': per['max'], 'exec_mean_s': ex['mean'],
                       'exec_p99_s': ex['p99'], 'exec_max_s': ex['max'],
-                      'command_stale': self.cmd_stale}
+                      'command_stale': self.cmd_stale,
+                      'latency_p50_s': self.latency.percentile(50),
+                      'latency_p99_s': self.latency.percentile(99),
+                      'latency_max_s': self.latency.max, 'answers': self.latency.n}
             values.update(self.c)
             bad = any(self.c.get(k, 0) for k in ('rejected_commands', 'rejected_loads',
                                                   'rejected_selects', 'tick_errors'))

@@ -2,8 +2,9 @@
 
 lockstep (default): plant_sim, estimator, controller and switch_manager as separate processes
 over DDS, the plant stepping when command(k) has arrived, the sweep node driving them;
-realtime: the same on the wall clock at 1 kHz (on a 2-core machine the Python DDS stack
-cannot hold 1 kHz, see README); batch: the same core objects in one process.
+realtime: on the wall clock at 1 kHz, the loop nodes composed in one eha_loop process (as
+scripts/run_stack runs them; README "Real time at 1 kHz"); batch: the same core objects in one
+process.
 Every mode writes out/<run>/summary.json, data.csv, bode.png (and logs/ for the node modes).
 """
 from __future__ import annotations
@@ -32,8 +33,9 @@ def parse(argv):
                     'Sweep defaults come from config/sweep.yaml (1-15 Hz, 1 mm).')
     ap.add_argument('--mode', choices=MODES, default='lockstep',
                     help='lockstep (default): nodes over DDS, the plant waits for each command; '
-                         'realtime: nodes over DDS on the wall clock at 1 kHz; batch: core '
-                         'objects in one process, no DDS')
+                         'realtime: wall clock at 1 kHz, loop nodes composed in one process '
+                         '(eha_loop), the sweep over DDS; batch: core objects in one process, '
+                         'no DDS')
     ap.add_argument('--amplitude-mm', type=float, help='sine amplitude [mm]')
     ap.add_argument('--offset-mm', type=float, help='centre position [mm]')
     ap.add_argument('--start-hz', type=float, help='first frequency [Hz]')
@@ -129,14 +131,17 @@ def run_batch(args, p, plan, out) -> dict:
 
 
 def run_nodes(args, over: dict, out: str) -> dict:
-    """Realtime / lockstep: every node its own process, the sweep node drives the run."""
+    """Lock-step: every node its own process; real time: the loop nodes composed (eha_loop);
+    the sweep node (its own process) drives the run."""
     from ..stack import Stack, node_command
     nodes = ['plant_sim', 'estimator', 'controller']
     if os.path.exists(os.path.join(args.config, 'switch_manager.yaml')):
         nodes.append('switch_manager')
     logs = os.path.join(out, 'logs')
-    stack = Stack(nodes, args.config, log_dir=logs, lockstep=args.mode == 'lockstep').start()
-    print(f'run: started {", ".join(nodes)} (logs in {logs}/)', flush=True)
+    stack = Stack(nodes, args.config, log_dir=logs, lockstep=args.mode == 'lockstep',
+                  composed=args.mode == 'realtime').start()
+    print(f'run: started {", ".join(nodes)} as {", ".join(stack.procs)} (logs in {logs}/)',
+          flush=True)
     sweep_args = ['-p', 'use_sim_time:=true'] if args.mode == 'lockstep' else []
     sweep_args += ['-p', f'sweep:sweep.out_dir:={os.path.dirname(out) or "."}',
                   '-p', f'sweep:sweep.run_name:={os.path.basename(out)}']

@@ -1,0 +1,88 @@
+"""scripts/bench stack: the whole loop under load, measured (issue 10 goals in the JSON).
+
+realtime_<structure>_*: plant_sim, estimator, controller, switch_manager at 1 kHz on the
+wall clock for --duration s (default 30), composed (eha_loop, the default structure) and as
+separate processes: ticks, lost ticks (state seq without its command before the next tick),
+state-to-command latency p50/p99/max, plant period p99, overruns, CPU per process.
+lockstep_*: the same nodes as processes in lock-step: simulated s per wall s.
+batch_*: the closed loop in one process, no DDS (bench batch) when available.
+"""
+from __future__ import annotations
+
+import importlib
+import time
+
+NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
+GOALS = {'answered_fraction': 0.999, 'latency_p99_s': 1e-3, 'cpu_total_cores': 1.0,
+         'batch_sim_per_wall': 50.0}
+
+
+def measure_stack(duration: float, lockstep: bool = False, composed: bool = False,
+                  warmup: float = 3.0, log_dir=None) -> dict:
+    """Start the stack, wait for the loop to run, measure over ``duration`` s."""
+    from ..monitor import CpuMeter, DiagMonitor
+    from ..stack import Stack
+    monitor = DiagMonitor('bench_stack')
+    stack = Stack(NODES, lockstep=lockstep, composed=composed, log_dir=log_dir).start()
+    try:
+        end = time.monotonic() + 90
+        while monitor.find('plant_sim: loop').get('ticks', 0) < 100:
+            if time.monotonic() > end or stack.dead():
+                raise RuntimeError(f'the loop did not start within 90 s (exited: {stack.dead()})')
+            time.sleep(0.1)
+        time.sleep(warmup)
+        d0 = monitor.find('plant_sim: loop')
+        cpu = CpuMeter(stack.procs)
+        cpu.start()
+        t0 = time.monotonic()
+        time.sleep(duration)
+        wall = time.monotonic() - t0
+        share = cpu.read()
+        time.sleep(1.2)                                  # one more diagnostics period
+        d1 = monitor.find('plant_sim: loop')
+        snap = monitor.snapshot()
+    finally:
+        stack.stop()
+        monitor.close()
+    ticks = d1.get('ticks', 0) - d0.get('ticks', 0)
+    lost = d1.get('commands_not_for_previous_tick', 0) - d0.get('commands_not_for_previous_tick', 0)
+    out = {'wall_s': wall, 'ticks': ticks, 'lost_ticks': lost,
+           'answered_fraction': 1.0 - lost / ticks if ticks else 0.0,
+           'ticks_per_wall_s': ticks / wall,
+           'latency_p50_s': d1.get('latency_p50_s'), 'latency_p99_s': d1.get('latency_p99_s'),
+           'latency_max_s': d1.get('latency_max_s'),
+           'plant_period_p99_s': d1.get('period_p99_s'), 'plant_period_max_s': d1.get('period_max_s'),
+           'overruns': d1.get('overruns', 0) - d0.get('overruns', 0),
+           'cpu_total_cores': sum(share.values())}
+    out.update({f'cpu_{n}_cores': c for n, c in share.items()})
+    for name, values in snap.items():
+        node = name.split(':')[0]
+        for key in ('exec_mean_s', 'exec_p99_s'):
+            if key in values:
+                out[f'{node}_{key}'] = values[key]
+    return out
+
+
+def run(args) -> dict:
+    duration = args.duration or 30.0
+    result = {'duration_s': duration}
+    for label, kw in (('realtime_composed', {'composed': True}), ('realtime_processes', {}),
+                      ('lockstep', {'lockstep': True})):
+        print(f'bench stack: {label} for {duration:g} s ...', flush=True)
+        r = measure_stack(duration if label != 'lockstep' else min(duration, 15.0), **kw)
+        result.update({f'{label}_{k}': v for k, v in r.items()})
+    result['lockstep_sim_s_per_wall_s'] = result['lockstep_ticks_per_wall_s'] * 1e-3
+    try:
+        batch = importlib.import_module(f'{__package__}.batch')
+    except ImportError:
+        batch = None
+    if batch is not None:
+        print('bench stack: batch closed loop ...', flush=True)
+        result.update({f'batch_{k}': v for k, v in batch.run(args).items()})
+    rt = 'realtime_composed_'
+    result['goal_answered_met'] = result[rt + 'answered_fraction'] >= GOALS['answered_fraction']
+    result['goal_latency_met'] = (result[rt + 'latency_p99_s'] or 1.0) <= GOALS['latency_p99_s']
+    result['goal_cpu_met'] = result[rt + 'cpu_total_cores'] <= GOALS['cpu_total_cores']
+    if 'batch_sim_s_per_wall_s' in result:
+        result['goal_batch_met'] = result['batch_sim_s_per_wall_s'] >= GOALS['batch_sim_per_wall']
+    return result

@@ -1,0 +1,199 @@
+"""scripts/run_stack: start the EHA stack (parameters from config/), watch it, stop it cleanly.
+
+Real time (default): the 1 kHz loop nodes (plant_sim or hardware_bridge, estimator,
+controller, switch_manager) run composed in one eha_loop process (in-process topics; see
+README "Real time at 1 kHz" for the measurements behind this), every other node in its own
+process. --structure processes runs each loop node as its own process as well. Lock-step:
+every node its own process, the plant steps when command(k) has arrived.
+One folder per run: out/stack/<run>/ with logs/<process>.log and stack.json (commands, exit
+codes, CPU per process, the nodes' last /diagnostics).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+from ..core.cli import UsageError, guarded
+from ..core.params import default_config_dir
+from ..core.report import run_dir, write_json
+
+LOOP = ('estimator', 'controller', 'switch_manager')
+PLANT_NODE = {'sim': 'plant_sim', 'bridge': 'hardware_bridge'}
+
+
+def parse(argv):
+    ap = argparse.ArgumentParser(prog='scripts/run_stack', description=__doc__.split('\n\n')[0],
+                                 epilog='Node parameters: -p node:key:=value (repeatable), '
+                                        'e.g. -p plant_sim:sim_node.seed:=3')
+    ap.add_argument('--mode', choices=('realtime', 'lockstep'), default='realtime',
+                    help='realtime (default): wall clock at 1 kHz; lockstep: the plant waits for '
+                         'each command, nodes follow /clock (deterministic)')
+    ap.add_argument('--plant', choices=sorted(PLANT_NODE), default='sim',
+                    help='sim (default): plant_sim; bridge: hardware_bridge to the drive')
+    ap.add_argument('--structure', choices=('auto', 'composed', 'processes'), default='auto',
+                    help='auto (default): composed in real time, processes in lock-step')
+    ap.add_argument('--duration', type=float, default=None,
+                    help='stop after this many seconds of running loop, counted from the '
+                         'first plant tick (default: run until Ctrl-C)')
+    ap.add_argument('--start-timeout', type=float, default=120.0,
+                    help='give up when the loop has not started after this many seconds')
+    ap.add_argument('--sweep', action='store_true',
+                    help='also run the sweep node (config/sweep.yaml); stop when it finishes')
+    ap.add_argument('--record', action='store_true',
+                    help='record every /eha topic to out/stack/<run>/recording.mcap')
+    ap.add_argument('--no-switch-manager', action='store_true',
+                    help='leave the switch manager out (channel A drives throughout)')
+    ap.add_argument('-p', dest='params', action='append', default=[], metavar='NODE:KEY:=VALUE',
+                    help='parameter override for one node')
+    ap.add_argument('--config', default=default_config_dir(), help='config folder (config/)')
+    ap.add_argument('--out', default=os.path.join('out', 'stack'),
+                    help='base folder of the run folders (out/stack)')
+    ap.add_argument('--name', default=None, help='run folder name (default: timestamp)')
+    ap.add_argument('--progress', type=float, default=5.0,
+                    help='seconds between progress lines (0: none)')
+    return ap.parse_args(argv)
+
+
+def plan(args) -> dict:
+    """What to start: nodes, structure, per-node extra arguments. Raises UsageError."""
+    if args.duration is not None and args.duration <= 0:
+        raise UsageError(f'--duration {args.duration:g}: must be positive')
+    structure = args.structure
+    if structure == 'auto':
+        structure = 'processes' if args.mode == 'lockstep' else 'composed'
+    if structure == 'composed' and args.mode == 'lockstep':
+        raise UsageError('--structure composed is real time only: lock-step runs every node '
+                         'as its own process')
+    plant = PLANT_NODE[args.plant]
+    nodes = [plant] + [n for n in LOOP
+                       if not (n == 'switch_manager' and args.no_switch_manager)]
+    if args.sweep:
+        nodes.append('sweep')
+    extra: dict = {}
+    for item in args.params:
+        node, sep, rest = item.partition(':')
+        if not sep or ':=' not in rest:
+            raise UsageError(f'-p {item!r}: expected node:key:=value')
+        if node not in nodes:
+            raise UsageError(f'-p {item!r}: node {node!r} is not in this stack '
+                             f'({", ".join(nodes)})')
+        extra.setdefault(node, []).extend(['-p', item])
+    return {'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant}
+
+
+def wait_for_loop(stack, monitor, plant: str, timeout: float) -> str:
+    """Until the plant's diagnostics count ticks: 'duration' (running) or why not."""
+    end = time.monotonic() + timeout
+    while loop_status(monitor, plant).get('ticks', 0) <= 0:
+        dead = stack.dead()
+        if dead:
+            return 'node exited: ' + ', '.join(f'{n} ({c})' for n, c in dead.items())
+        if time.monotonic() > end:
+            return f'loop not started within {timeout:g} s'
+        time.sleep(0.2)
+    return 'duration'
+
+
+def loop_status(monitor, plant: str) -> dict:
+    return monitor.find(f'{plant}: loop')
+
+
+def progress_line(elapsed: float, loop: dict, cpu: dict) -> str:
+    ticks = loop.get('ticks', 0)
+    lost = loop.get('commands_not_for_previous_tick', 0)
+    share = 100.0 * lost / ticks if ticks else 0.0
+    cpu_text = ', '.join(f'{n} {100 * c:.0f} %' for n, c in cpu.items())
+    return (f'run_stack: {elapsed:6.1f} s: ticks {ticks}, lost {lost} ({share:.2f} %), '
+            f'latency p99 {1e3 * loop.get("latency_p99_s", 0.0):.2f} ms, '
+            f'overruns {loop.get("overruns", 0)}; CPU {cpu_text}')
+
+
+def main(argv=None) -> int:
+    args = parse(sys.argv[1:] if argv is None else argv)
+    return guarded('run_stack', lambda: run(args))
+
+
+def run(args) -> int:
+    from ..monitor import CpuMeter, DiagMonitor
+    from ..stack import Stack
+    p = plan(args)
+    out = run_dir(args.out, args.name)
+    logs = os.path.join(out, 'logs')
+    extra = p['extra']
+    if args.sweep:
+        extra.setdefault('sweep', []).extend(
+            ['-p', f'sweep:sweep.out_dir:={out}', '-p', 'sweep:sweep.run_name:=sweep'])
+    stack = Stack(p['nodes'], args.config, extra=extra, log_dir=logs,
+                  lockstep=args.mode == 'lockstep', composed=p['structure'] == 'composed',
+                  **({'record': os.path.join(out, 'recording.mcap')} if args.record else {}))
+    monitor = DiagMonitor()
+    stack.start()
+    print(f'run_stack: {args.mode}, {p["structure"]}: started '
+          f'{", ".join(stack.procs)} (logs in {logs}/)', flush=True)
+    cpu = CpuMeter(stack.procs)
+    t_start = time.monotonic()
+    reason = 'duration'
+    try:
+        reason = wait_for_loop(stack, monitor, p['plant'], args.start_timeout)
+        print(f'run_stack: loop running after {time.monotonic() - t_start:.1f} s', flush=True)
+    except KeyboardInterrupt:
+        reason = 'interrupted during start-up'
+    cpu.start()
+    t0 = time.monotonic()
+    last_print = t0
+    try:
+        while reason == 'duration':
+            time.sleep(0.2)
+            now = time.monotonic()
+            dead = stack.dead()
+            if 'sweep' in dead and dead['sweep'] == 0 and len(dead) == 1:
+                reason = 'sweep finished'
+                break
+            if dead:
+                reason = 'node exited: ' + ', '.join(f'{n} ({c})' for n, c in dead.items())
+                break
+            if args.duration is not None and now - t0 >= args.duration:
+                break
+            if args.progress and now - last_print >= args.progress:
+                last_print = now
+                print(progress_line(now - t0, loop_status(monitor, p['plant']), cpu.read()),
+                      flush=True)
+    except KeyboardInterrupt:
+        reason = 'interrupted'
+    elapsed = time.monotonic() - t0
+    cpu_share = cpu.read()
+    diagnostics = monitor.snapshot()
+    results = stack.stop()
+    monitor.close()
+    codes = {n: rc for n, (rc, _) in results.items()}
+    summary = {'mode': args.mode, 'structure': p['structure'], 'plant': p['plant'],
+               'processes': {n: ' '.join(c) for n, c in stack.commands().items()},
+               'stop_reason': reason, 'wall_s': elapsed, 'exit_codes': codes,
+               'cpu_share': cpu_share, 'diagnostics': diagnostics}
+    write_json(os.path.join(out, 'stack.json'), summary, sort_keys=True)
+    print(progress_line(elapsed, diagnostics.get(f'{p["plant"]}: loop', {}), cpu_share))
+    bad = {n: c for n, c in codes.items() if c not in (0, None)}
+    print(f'run_stack: stopped ({reason}) after {elapsed:.1f} s; '
+          f'{"exit codes " + str(bad) if bad else "all processes exited cleanly"}; '
+          f'{out}/stack.json')
+    if reason != 'duration' and not reason.startswith(('sweep', 'interrupted')) or bad:
+        for name in bad:
+            tail = _tail(os.path.join(logs, f'{name}.log'))
+            print(f'run_stack: {name}: {tail}', file=sys.stderr)
+        return 1
+    return 0
+
+
+def _tail(path: str) -> str:
+    try:
+        with open(path) as fh:
+            lines = [ln.strip() for ln in fh if ln.strip()]
+        return lines[-1] if lines else '(empty log)'
+    except OSError:
+        return '(no log)'
+
+
+if __name__ == '__main__':
+    sys.exit(main())
