@@ -1,5 +1,6 @@
 """switch_manager over DDS with the full simulated stack (plant_sim, estimator, controller,
-switch_manager as processes, eha_ros.stack.Stack): Table 3.4 sine (3 Hz, 3 mm) published at
+switch_manager composed in one eha_loop process as scripts/run_stack runs them in real time;
+this test is a separate process on DDS): Table 3.4 sine (3 Hz, 3 mm) published at
 1 kHz on /eha/reference, 10 kN on /eha/sim/load_force at 1 s, commanded switch A -> B at 3 s,
 motor_fail on the active couple B at 5 s (automatic switch to A), motor_fail on A at 7 s (both
 failed: safe state). Figures from /eha/sim/truth and /eha/state matched by seq (plant ticks),
@@ -38,13 +39,16 @@ class EventsSpinner(Spinner):
         super().__init__(node, make_executor())
 
 
+REF_LEAD = 3          # ticks: references are sent this far ahead with their seq (as the sweep)
+
+
 def ref_at(t):
     return AMP * math.sin(2 * math.pi * FREQ * t) if t > 0 else 0.0
 
 
 class Recorder:
     """Test-side node: records truth/state/status/select/diagnostics and publishes the
-    reference for the next tick on every truth sample (1 kHz, locked to plant ticks)."""
+    reference REF_LEAD ticks ahead on every truth sample (1 kHz, locked to plant ticks)."""
 
     def __init__(self, node):
         from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, ExternalLoad,
@@ -80,8 +84,8 @@ class Recorder:
     def on_truth(self, m):
         self.last_seq = m.seq
         if self.seq0 is not None:
-            self.ref_pub.publish(self.Ref(seq=m.seq + 1,
-                                          position=ref_at((m.seq + 1 - self.seq0) * TS)))
+            k = m.seq + REF_LEAD                # tick-locked, ahead of the DDS hop
+            self.ref_pub.publish(self.Ref(seq=k, position=ref_at((k - self.seq0) * TS)))
             self.truth[m.seq] = (m.position, m.motor_speed[0], m.motor_speed[1],
                                  m.valve_fraction[0], m.valve_fraction[1], m.bypass_fraction)
 
@@ -145,8 +149,9 @@ def run(rclpy_session, tmp_path_factory):
     node = rclpy_session.create_node(f'test_sm_{os.getpid()}')
     rec = Recorder(node)
     spinner = EventsSpinner(node)
+    # the real-time structure of scripts/run_stack: the loop nodes composed in one process
     stack = Stack(['plant_sim', 'estimator', 'controller', 'switch_manager'], extra=extra,
-                  log_dir=str(tmp / 'logs')).start()
+                  log_dir=str(tmp / 'logs'), composed=True).start()
     out = {'rec': rec, 'log_dir': log_dir, 'responses': {}}
     try:
         ready = wait_for(lambda: rec.commands > 200 and rec.status and rec.selects and

@@ -63,3 +63,32 @@ class Histogram:
         if self.n == 0:
             return 0.0
         return float(self.counts[:int(limit / self.bin)].sum()) / self.n
+
+
+class LoopStats:
+    """Per-node loop figures for /diagnostics: input period, execution time, overruns (a
+    callback that took longer than the period ``Ts``)."""
+
+    def __init__(self, Ts: float):
+        self.Ts = Ts
+        self.period = RingStats()
+        self.exec = RingStats()
+        self.overruns = 0
+        self._last = None
+
+    def arrived(self, now: float):
+        """An input of the loop arrived at ``now`` (s, any clock)."""
+        if self._last is not None:
+            self.period.add(now - self._last)
+        self._last = now
+
+    def executed(self, seconds: float):
+        self.exec.add(seconds)
+        if seconds > self.Ts:
+            self.overruns += 1
+
+    def values(self) -> dict:
+        per, ex = self.period.summary(), self.exec.summary()
+        return {'period_mean_s': per['mean'], 'period_p99_s': per['p99'],
+                'period_max_s': per['max'], 'exec_mean_s': ex['mean'], 'exec_p99_s': ex['p99'],
+                'exec_max_s': ex['max'], 'overruns': self.overruns}

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..core.controller.params import SCHEMA
 from ..core.controller.position import PositionController
-from ..core.stats import Counters, RingStats
+from ..core.stats import Counters, LoopStats
 from . import diag
 from .common import clock_s, declare_and_validate, latched_qos, node_base, run, stream_qos
 
@@ -64,7 +64,7 @@ def make_node(params: dict):
             self.ref_seq = 0                    # newest tick-locked reference seen
             self.held = deque()                 # lock-step: estimates waiting for their reference
             self.lockstep = bool(self.get_parameter('use_sim_time').value)
-            self.exec_time = RingStats()
+            self.loop = LoopStats(self.Ts)
             self.cmd = ActuatorCommand()
             qos = stream_qos()
             self.pub = self.create_publisher(ActuatorCommand, 'eha/command', qos)
@@ -133,6 +133,7 @@ def make_node(params: dict):
         def process_estimate(self, msg):
             t0 = time.perf_counter()
             now = clock_s(self)
+            self.loop.arrived(now)
             self.last_seq = msg.seq
             while self.pending and self.pending[0][0] <= msg.seq:
                 self.apply_reference(self.pending.popleft()[1])
@@ -153,7 +154,7 @@ def make_node(params: dict):
             else:
                 speed, saturated = self.last_speed, False    # short gap: hold
             self.send(msg.seq, speed, saturated, msg.header.stamp)
-            self.exec_time.add(time.perf_counter() - t0)
+            self.loop.executed(time.perf_counter() - t0)
 
         def send(self, seq, speed, saturated, stamp=None):
             c = self.cmd
@@ -179,9 +180,8 @@ def make_node(params: dict):
                 self.send(0, 0.0, False)      # seq 0: answers no estimate (contract)
 
         def publish_diagnostics(self):
-            ex = self.exec_time.summary()
-            values = {'exec_mean_s': ex['mean'], 'exec_p99_s': ex['p99'], 'exec_max_s': ex['max'],
-                      'watchdog_tripped': self.tripped, 'drive_gain_mismatch': self.mismatch}
+            values = self.loop.values()
+            values.update(watchdog_tripped=self.tripped, drive_gain_mismatch=self.mismatch)
             values.update(self.c)
             warn = self.tripped or self.c.get('rejected_references', 0) > 0 or \
                 self.mismatch > self.p['control.drive_check_tolerance']

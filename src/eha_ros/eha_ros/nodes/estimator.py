@@ -15,7 +15,7 @@ import time
 from ..core.estimator.estimator import Estimator
 from ..core.estimator.fault_detector import NAMES
 from ..core.estimator.params import SCHEMA
-from ..core.stats import Counters, RingStats
+from ..core.stats import Counters, LoopStats
 from . import diag
 from .common import clock_s, declare_and_validate, node_base, run, stream_qos
 
@@ -33,8 +33,7 @@ def make_node(params: dict):
             self.est = Estimator(self.p)
             self.stale_time = self.p['estimator.node.stale_time']
             self.c = Counters()
-            self.period = RingStats()
-            self.exec_time = RingStats()
+            self.loop = LoopStats(self.est.Ts)
             self.last_arrival = None
             self.last_seq = None
             self.stale = False
@@ -59,8 +58,7 @@ def make_node(params: dict):
         def on_state(self, msg):
             t0 = time.perf_counter()
             now = clock_s(self)
-            if self.last_arrival is not None:
-                self.period.add(now - self.last_arrival)
+            self.loop.arrived(now)
             self.last_arrival = now
             ticks = 1
             if self.last_seq is not None:
@@ -84,7 +82,7 @@ def make_node(params: dict):
                     f'({"predict only" if r.update_skipped else "partial update"})',
                     throttle_duration_sec=1.0)
             self.publish(r, msg.header.stamp, msg.seq, False)
-            self.exec_time.add(time.perf_counter() - t0)
+            self.loop.executed(time.perf_counter() - t0)
 
         def on_timer(self):
             if self.last_arrival is None:
@@ -116,13 +114,11 @@ def make_node(params: dict):
             self.pub.publish(m)
 
         def publish_diagnostics(self):
-            per, ex = self.period.summary(), self.exec_time.summary()
-            values = {'period_mean_s': per['mean'], 'period_p99_s': per['p99'],
-                      'period_max_s': per['max'], 'exec_mean_s': ex['mean'],
-                      'exec_p99_s': ex['p99'], 'exec_max_s': ex['max'], 'stale': self.stale,
-                      'last_seq': self.last_seq if self.last_seq is not None else -1,
-                      'sensor_fault': NAMES[self.est.detector.code],
-                      'position_variance_m2': self.est.kf.position_variance}
+            values = self.loop.values()
+            values.update({'stale': self.stale,
+                           'last_seq': self.last_seq if self.last_seq is not None else -1,
+                           'sensor_fault': NAMES[self.est.detector.code],
+                           'position_variance_m2': self.est.kf.position_variance})
             values.update(self.c)
             values.update({f'estimator_{k}': v for k, v in self.est.counters.items()})
             for code, n in self.est.detector.detections.items():

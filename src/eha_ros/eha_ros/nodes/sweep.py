@@ -16,6 +16,7 @@ import time
 from ..core.params import default_config_dir, load
 from ..core.report import run_dir
 from ..core.sweep.params import SCHEMA, build_plan
+from ..core.stats import LoopStats
 from ..core.sweep.session import SweepSession, print_table
 from . import diag
 from .common import declare_and_validate, node_base, run, stream_qos
@@ -60,6 +61,7 @@ def make_node(params: dict):
                                         p['sweep.abort_error'], p['sweep.abort_ticks'], model,
                                         settle_periods=p['sweep.settle_periods'])
             self.ref_msg = PositionReference()
+            self.loop = LoopStats(plan.Ts)
             self.ready_since = None
             self.commands_seen = 0
             self.done = False
@@ -91,6 +93,12 @@ def make_node(params: dict):
                 self.end()
 
         def on_state(self, msg):
+            t0 = time.perf_counter()
+            self.loop.arrived(t0)
+            self.handle_state(msg)
+            self.loop.executed(time.perf_counter() - t0)
+
+        def handle_state(self, msg):
             s = self.session
             k = msg.seq
             if s.seq0 is None:
@@ -140,7 +148,7 @@ def make_node(params: dict):
             values = {'started': s.seq0 is not None, 'points': len(s.points),
                       'planned_points': len(getattr(self.plan, 'segments', [])),
                       'finished': s.finished, 'status': s.aborted or 'running',
-                      'out_dir': self.out}
+                      'out_dir': self.out, **self.loop.values()}
             diag.publish(self, self.pub_diag, 'sweep', values,
                          diag.ERROR if s.aborted else diag.OK, s.aborted or 'ok')
 

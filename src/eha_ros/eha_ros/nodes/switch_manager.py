@@ -18,7 +18,7 @@ from collections import deque
 
 from ..core.redundancy import ChannelSample, EventLog, SwitchManager
 from ..core.redundancy.params import SCHEMA, check
-from ..core.stats import Counters
+from ..core.stats import Counters, LoopStats
 from . import diag
 from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
 
@@ -47,6 +47,7 @@ def make_node(params: dict):
             self.log = EventLog(p['switch.node.log_dir'])
             self.lock = threading.Lock()
             self.c = Counters()
+            self.loop = LoopStats(self.Ts)
             self.speed_ref = 0.0
             self.cmd_seq = None
             self.refs = deque(maxlen=256)    # (seq, speed ref) of recent commands
@@ -96,6 +97,12 @@ def make_node(params: dict):
             self.estimate_ok = not (msg.stale or msg.update_skipped or msg.sensor_fault)
 
         def on_state(self, msg):
+            t0 = time.perf_counter()
+            self.loop.arrived(t0)
+            self.handle_state(msg)
+            self.loop.executed(time.perf_counter() - t0)
+
+        def handle_state(self, msg):
             values = (msg.position, msg.pressure_a, msg.pressure_b, *msg.motor_speed,
                       *msg.motor_current)
             if not _finite(*values[3:]) or not msg.valid:
@@ -216,6 +223,7 @@ def make_node(params: dict):
                           'last_event': mgr.events[-1].line() if mgr.events else ''}
                 name = mgr.name
             values.update(self.c)
+            values.update(self.loop.values())
             if name == 'FAILED_SAFE':
                 level, text = diag.ERROR, 'both channels failed: safe state ' + \
                     self.p['switch.safe_mode']
