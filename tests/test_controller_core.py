@@ -107,3 +107,45 @@ def test_bumpless_restart_and_hold():
     for _ in range(20):
         ctl.update(0.0102)
     assert ctl.v == v                             # no integration during the hold
+
+
+def test_jumped_reference_moves_with_bounded_acceleration_and_sines_pass_unchanged():
+    from eha_ros.core.controller.reference import ReferenceShaper
+    from eha_ros.core.stats import Counters
+    sh = ReferenceShaper(0.12, 0.005, 0.19, TS, Counters(), accel_limit=10.0)
+    sh.start_from(0.0)
+    sh.request(0.005)
+    r = np.array([0.0] + [sh.next() for _ in range(200)])
+    v = np.diff(r) / TS
+    a = np.diff(v) / TS
+    assert r.max() == 0.005 and r[-1] == 0.005 and np.all(np.diff(r) >= 0)   # no overshoot
+    assert np.max(v) <= 0.19 + 1e-12
+    assert np.max(np.abs(a)) <= 1.2 * 10.0           # the arrival snap: a little over a
+    assert np.nonzero(r == 0.005)[0][0] < 0.05 / TS  # there in 2 sqrt(d/a) ~ 45 ms
+    for f in (1.0, 7.0, 15.0):                       # feasible targets are followed exactly
+        sh = ReferenceShaper(0.12, 0.005, 0.19, TS, Counters(), accel_limit=10.0)
+        sh.start_from(0.0)
+        for k in range(1000):
+            target = 1e-3 * math.sin(2 * math.pi * f * k * TS)
+            sh.request(target)
+            assert sh.next() == target
+
+
+def test_5mm_step_on_the_nonlinear_plant_overshoot_settling():
+    """Issue 6 step figures on the nonlinear plant (estimator in the loop, batch). Without the
+    acceleration limit the 190 mm/s ramp alone drives the speed clamp: about 11 % overshoot."""
+    from eha_ros.core.batch import BatchStack
+    res = {}
+    for acc in (10.0, 0.0):
+        st = BatchStack(overrides={'controller': {'controller:control.accel_limit': acc}})
+        for _ in range(500):
+            st.tick(0.0)
+        x = np.array([st.tick(0.005).truth for _ in range(1500)])
+        out = np.nonzero(np.abs(x - 0.005) > 0.02 * 0.005)[0]
+        res[acc] = (100 * (x.max() - 0.005) / 0.005, (out[-1] + 1) * TS,
+                    abs(x[-300:].mean() - 0.005))
+    print(f'5 mm step (overshoot %, 2 % settling s, steady error m): with 10 m/s^2 {res[10.0]}, '
+          f'rate limit only {res[0.0]}')
+    overshoot, settling, steady = res[10.0]
+    assert overshoot <= 5.0 and settling <= 0.3 and steady <= 20e-6
+    assert res[0.0][0] > 5.0

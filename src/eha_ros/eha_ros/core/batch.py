@@ -57,11 +57,7 @@ class BatchStack:
         self.estimator = Estimator(node_params('estimator', EST, config_dir, ov.get('estimator')))
         c = node_params('controller', CTL, config_dir, ov.get('controller'))
         self.controller_params = c
-        self.controller = PositionController(
-            (c['position_controller.num'], c['position_controller.den']),
-            (c['prefilter.num'], c['prefilter.den']), c['plant.sim.Ts'],
-            c['plant.drive.omega_max'], c['plant.cylinder.stroke'], c['control.stroke_margin'],
-            c['control.rate_limit'], c['control.antiwindup'])
+        self.controller = PositionController.from_params(c)
         self.Ts = self.plant.Ts
         self.k = 0
 

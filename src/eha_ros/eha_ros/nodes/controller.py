@@ -43,11 +43,7 @@ def make_node(params: dict):
             self.Ts = p['plant.sim.Ts']
             self.c = Counters()
             prewarp = 2 * np.pi * p['control.prewarp_hz'] or None
-            self.ctl = PositionController(
-                (p['position_controller.num'], p['position_controller.den']),
-                (p['prefilter.num'], p['prefilter.den']), self.Ts, p['plant.drive.omega_max'],
-                p['plant.cylinder.stroke'], p['control.stroke_margin'], p['control.rate_limit'],
-                p['control.antiwindup'], prewarp_w=prewarp, counters=self.c)
+            self.ctl = PositionController.from_params(p, counters=self.c)
             self.mismatch = drive_mismatch(p)
             if self.mismatch > p['control.drive_check_tolerance']:
                 self.get_logger().warning(

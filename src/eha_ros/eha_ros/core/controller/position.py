@@ -68,11 +68,12 @@ class PositionController:
 
     def __init__(self, G, F, Ts: float, omega_max: float, stroke: float, margin: float,
                  rate_limit: float, antiwindup: bool = True, tracking_time: float = 0.01,
-                 prewarp_w: float | None = None, counters: Counters | None = None):
+                 prewarp_w: float | None = None, counters: Counters | None = None,
+                 accel_limit: float = 0.0):
         self.Ts = Ts
         self.omega_max = omega_max
         self.c = counters if counters is not None else Counters()
-        self.ref = ReferenceShaper(stroke, margin, rate_limit, Ts, self.c)
+        self.ref = ReferenceShaper(stroke, margin, rate_limit, Ts, self.c, accel_limit)
         self.F = DiscreteSS(*tustin(*tf_to_ss(*F), Ts, prewarp_w))
         if abs(self.F.dc_gain() - 1.0) > 1e-6:
             raise ValueError(f'prefilter DC gain {self.F.dc_gain():.6g}: expected 1')
@@ -88,6 +89,16 @@ class PositionController:
         self.v = 0.0
         self.clamped = 0              # sign of the clamp at the previous tick (0: none)
         self.hold = 0                 # ticks left with the integrator held
+
+    @classmethod
+    def from_params(cls, p: dict, counters: Counters | None = None) -> 'PositionController':
+        """From the controller node's parameters (core.controller.params.SCHEMA)."""
+        prewarp = 2 * math.pi * p['control.prewarp_hz'] or None
+        return cls((p['position_controller.num'], p['position_controller.den']),
+                   (p['prefilter.num'], p['prefilter.den']), p['plant.sim.Ts'],
+                   p['plant.drive.omega_max'], p['plant.cylinder.stroke'],
+                   p['control.stroke_margin'], p['control.rate_limit'], p['control.antiwindup'],
+                   prewarp_w=prewarp, counters=counters, accel_limit=p['control.accel_limit'])
 
     def request(self, position: float) -> bool:
         return self.ref.request(position)

@@ -38,12 +38,7 @@ def make_controller(Ts: float):
     from ..controller.position import PositionController
     p = load(CSCHEMA, [config('plant.yaml'), config('controller.yaml'),
                        config('controller_node.yaml')], node='controller')
-    prewarp = 2 * np.pi * p['control.prewarp_hz'] or None
-    ctl = PositionController(
-        (p['position_controller.num'], p['position_controller.den']),
-        (p['prefilter.num'], p['prefilter.den']), Ts, p['plant.drive.omega_max'],
-        p['plant.cylinder.stroke'], p['control.stroke_margin'], p['control.rate_limit'],
-        p['control.antiwindup'], prewarp_w=prewarp)
+    ctl = PositionController.from_params(p)
     return ctl, int(round(p['control.switch_hold'] / Ts))
 
 
