@@ -49,7 +49,8 @@ class ReferenceShaper:
         if not self.accel or (self.rate == 0.0 and abs(delta) <= self.step):
             # rate limit only, or following a target that moves at most vmax Ts per tick
             # (a sine, a ramp): passed through unchanged
-            self.value += max(-self.step, min(self.step, delta))
+            self.value = self.target if abs(delta) <= self.step else \
+                self.value + math.copysign(self.step, delta)
             return self.value
         # a jump: time-optimal move with bounded rate and acceleration (the fastest rate from
         # which the reference can still stop on the target, reached at most a Ts per tick)
