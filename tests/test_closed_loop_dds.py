@@ -70,9 +70,6 @@ def bench(stack, ros_node):
     return b
 
 
-@pytest.mark.xfail(strict=True, reason='measured in lock-step on the nonlinear plant with the '
-                   'estimator: overshoot 11.9 % (limit 5 %), steady error 27.6 um vs truth '
-                   '(limit 20 um); 2 % settling 0.082 s meets 0.3 s (issue 6 open)')
 def test_5mm_step(bench):
     bench.goto(0.0)
     k0 = bench.seq
@@ -93,9 +90,6 @@ def test_5mm_step(bench):
     assert abs(final - 0.005) <= 20e-6
 
 
-@pytest.mark.xfail(strict=True, reason='measured: position error grows under the load (86 um '
-                   'after 3 s, 271 um after 8 s; limit 50 um): the estimator model has no load '
-                   'input, its estimate drifts, and the loop holds the estimate (issues 4, 6)')
 def test_23kN_static_load(bench):
     bench.goto(0.0, 1000)
     bench.load.publish(bench.Load(force=23e3))

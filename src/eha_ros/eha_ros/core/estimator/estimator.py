@@ -65,7 +65,9 @@ def build_filter(p: dict):
     kf = ModelKF(h, pp.Ts, p[e + 'model.q'], p[e + 'model.p0'], R_pos, R_pd, gm,
                  F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
                  q_leak=p[e + 'model.q_leak'] if p[e + 'model.leak_state'] else None,
-                 p0_leak=p[e + 'model.p0_leak'])
+                 p0_leak=p[e + 'model.p0_leak'],
+                 q_load=p[e + 'model.q_load'] if p[e + 'model.load_state'] else None,
+                 p0_load=p[e + 'model.p0_load'])
     kf.friction_uses_pressure = p[e + 'model.friction_pressure']
     return kf
 

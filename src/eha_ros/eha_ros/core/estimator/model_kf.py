@@ -121,6 +121,10 @@ class ModelKF(kernels.StateView):
     25 um of position over a quarter period at 1 Hz. dC enters the p_D row of eq. 4.35 as
     -2 beta/V_d dC p_D; its ZOH column is that of a unit input scaled by the held p_D.
 
+    With ``q_load`` (N^2 per step) an external force F_d on the piston (random walk, e.g. an
+    aerodynamic hinge load) is a state: the measured load pressure then balances F_d instead
+    of accelerating the model piston, so a static load does not bias the position estimate.
+
     ``q_diag``/``p0_diag``: per-step process noise and initial variances of x, xdot, p_D;
     ``R_pos`` the white position noise variance, ``R_pd`` that of p_D = p_A - p_B (twice one
     sensor's) or None for position-only measurements.
@@ -129,12 +133,12 @@ class ModelKF(kernels.StateView):
     def __init__(self, h: HydroMech, Ts: float, q_diag, p0_diag, R_pos: float,
                  R_pd: float | None = None, gm: tuple | None = None,
                  F_s: float = 800.0, v_eps: float = 3e-3, q_leak: float | None = None,
-                 p0_leak: float = 1.0):
+                 p0_leak: float = 1.0, q_load: float | None = None, p0_load: float = 1e8):
         self.h, self.Ts, self.F_s, self.v_eps = h, Ts, F_s, v_eps
         self.friction_uses_pressure = True
         A, B = continuous(h, None if gm is None else gm[1])
         F3, G = zoh(A, B, Ts)
-        n = A.shape[0] + (q_leak is not None)
+        n = A.shape[0] + (q_leak is not None) + (q_load is not None)
         self.n = n
         self._n_lin = A.shape[0]
         self.F = np.eye(n)
@@ -156,6 +160,14 @@ class ModelKF(kernels.StateView):
             self.i_leak = len(q)
             q.append(q_leak)
             p0.append(p0_leak)
+        self.i_load = None
+        if q_load is not None:
+            # external force F_d [N] (random walk), held over Ts like F_L: its F column is
+            # the ZOH column of the force input
+            self.i_load = len(q)
+            self.F[:A.shape[0], self.i_load] = G[:, 1]
+            q.append(q_load)
+            p0.append(p0_load)
         self.Q = np.diag(np.asarray(q, float))
         self.P0 = np.diag(np.asarray(p0, float))
         self.with_pressure = R_pd is not None
@@ -213,6 +225,11 @@ class ModelKF(kernels.StateView):
     @property
     def pressure_diff(self) -> float:
         return float(self.x[2])
+
+    @property
+    def load_force(self) -> float:
+        """Estimated external force F_d along +x (N), 0 without the state."""
+        return 0.0 if self.i_load is None else float(self.x[self.i_load])
 
     @property
     def leak_correction(self) -> float:

@@ -38,6 +38,12 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.q_leak', 'float', '(1e-12 m^3/(s Pa))^2', 1e-8, 0.0, 1e6,
           doc='per-step random-walk variance of the leakage correction'),
     Param(E + 'model.p0_leak', 'float', '(1e-12 m^3/(s Pa))^2', 4.0, 0.0, 1e6),
+    Param(E + 'model.load_state', 'bool', '', True,
+          doc='add an external-force state (random walk) so a static load does not bias x'),
+    Param(E + 'model.q_load', 'float', 'N^2', 100.0, 0.0, 1e12,
+          doc='per-step random-walk variance of the external force'),
+    Param(E + 'model.p0_load', 'float', 'N^2', 1e8, 0.0, 1e14,
+          doc='initial variance of the external force'),
     # sensor noise model (the filter's R)
     Param(E + 'noise.position_sigma', 'float', 'm', 1.0e-5, 1e-9, 1e-2,
           doc='white position noise sigma (R of the position)'),
