@@ -136,7 +136,9 @@ class Watch:
                                if kv.key.startswith('count ')}
 
     def ticks(self) -> int:
-        return self.counts.get('/eha/state', 0)
+        """Messages of the least recorded compared stream (a stream can start late: the
+        recorder matches a publisher some time after the loop's own nodes did)."""
+        return min(self.counts.get(t, 0) for t in COMPARED)
 
 
 def run_recorded(node, tmp_path, name, seed, ticks):
@@ -196,7 +198,7 @@ def test_lockstep_runs_with_same_seed_record_identically(ros_node, tmp_path):
             seqs = sorted(run[topic])
             assert seqs == list(range(seqs[0], seqs[-1] + 1)), f'{topic}: seq gaps'
         common = sorted(set(pa[topic]) & set(pb[topic]))
-        assert len(common) >= ticks - 100, (topic, len(common))
+        assert len(common) >= 0.75 * ticks, (topic, len(common))
         repeats = [k for k in common if len(pa[topic][k]) > 1 or len(pb[topic][k]) > 1]
         assert not repeats, f'{topic}: one seq with different payloads, e.g. {repeats[:5]}'
         diff = [k for k in common if pa[topic][k] != pb[topic][k]]
