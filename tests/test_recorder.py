@@ -8,7 +8,7 @@ import time
 import pytest
 
 from eha_ros.core import recording
-from eha_ros.stack import Stack, node_command
+from eha_ros.stack import Stack, cpu_seconds, node_command
 from ros_util import fill, start_process, stop_process, wait_for
 
 pytestmark = pytest.mark.ros
@@ -114,13 +114,6 @@ STEPS = [(300, 0.002), (1000, -0.001)]     # tick-locked reference steps (tick, 
 HOLD_TICK = 1 << 40                         # "this reference holds until tick 2^40"
 
 
-def cpu_s(pid: int) -> float:
-    """User + system CPU seconds of a process (Linux /proc)."""
-    with open(f'/proc/{pid}/stat') as fh:
-        parts = fh.read().rsplit(')', 1)[1].split()
-    return (int(parts[11]) + int(parts[12])) / os.sysconf('SC_CLK_TCK')
-
-
 class Watch:
     """Follows the recorder's message counts on /diagnostics (no 1 kHz subscription here)."""
 
@@ -158,7 +151,7 @@ def run_recorded(node, tmp_path, name, seed, ticks):
             ref.publish(PositionReference(seq=k, position=x))
         assert wait_for(lambda: watch.ticks() >= ticks, 120), f'stalled: {watch.counts}'
         rec_pid = st.procs['recorder'].pid
-        cpu, wall = cpu_s(rec_pid), time.monotonic() - t0
+        cpu, wall = cpu_seconds(rec_pid), time.monotonic() - t0
     finally:
         res = st.stop(timeout=20)
         node.destroy_publisher(ref)

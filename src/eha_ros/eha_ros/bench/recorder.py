@@ -9,8 +9,7 @@ import tempfile
 import time
 
 from ..core import recording
-from ..stack import Stack
-from ._nodes import cpu_seconds
+from ..stack import Stack, cpu_seconds
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 WARMUP_S = 10.0
