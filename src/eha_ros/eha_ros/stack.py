@@ -58,14 +58,17 @@ class Stack:
     """Context manager: processes started in their own sessions, SIGINT then SIGKILL on exit.
 
     composed=True runs the loop nodes among ``nodes`` (LOOP_NODES) as one eha_loop process
-    (in-process topics between them; real time only), listed as 'eha_loop' in procs."""
+    (in-process topics between them; real time only), listed as 'eha_loop' in procs.
+    ``record='path.mcap'`` adds the recorder (every /eha topic and /diagnostics): it starts
+    first and stops last, after the other nodes have exited, so their last messages are in."""
 
     def __init__(self, nodes, config_dir=None, extra=None, log_dir=None, env=None,
-                 lockstep: bool = False, composed: bool = False):
+                 lockstep: bool = False, composed: bool = False, record: str | None = None):
         if composed and lockstep:
             raise ValueError('lock-step runs every node as its own process')
         self.nodes = list(nodes)
         self.composed = [n for n in self.nodes if n in LOOP_NODES] if composed else []
+        self.record = record
         self.config_dir = config_dir
         self.extra = {k: list(v) for k, v in (extra or {}).items()}
         if lockstep:           # the plant steps per command and publishes /clock; others follow it
@@ -73,6 +76,9 @@ class Stack:
                 self.extra.setdefault(name, [])
                 self.extra[name] += (['-p', 'plant_sim:sim_node.lockstep:=true']
                                      if name == 'plant_sim' else ['-p', 'use_sim_time:=true'])
+        if record:
+            self.extra.setdefault('recorder', [])
+            self.extra['recorder'] += ['-p', f'recorder:recorder.output:={record}']
         self.log_dir = log_dir
         self.env = dict(os.environ, **(env or {}))
         self.env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -80,8 +86,11 @@ class Stack:
         self._logs = []
 
     def commands(self) -> dict:
-        """{process name: command line} of what start() runs."""
+        """{process name: command line} of what start() runs (the recorder first)."""
         cmds = {}
+        if self.record and 'recorder' not in self.nodes:
+            cmds['recorder'] = node_command('recorder', self.config_dir,
+                                            self.extra.get('recorder', ()))
         if self.composed:
             cmds['eha_loop'] = composed_command(self.composed, self.config_dir, self.extra)
         for name in self.nodes:
@@ -107,24 +116,34 @@ class Stack:
         return {n: p.returncode for n, p in self.procs.items() if p.poll() is not None}
 
     def stop(self, timeout: float = 10.0) -> dict:
-        """SIGINT all, wait, SIGKILL stragglers; returns {name: (returncode, stderr)}."""
-        for p in self.procs.values():
+        """SIGINT all (the recorder last), wait, SIGKILL stragglers; returns
+        {name: (returncode, stderr)}."""
+        end = time.monotonic() + timeout
+        nodes = {n: p for n, p in self.procs.items() if n != 'recorder'}
+        out = self._stop_group(nodes, end)
+        if 'recorder' in self.procs:       # after the others: their last messages are recorded
+            out.update(self._stop_group({'recorder': self.procs['recorder']},
+                                        max(end, time.monotonic() + 5.0)))
+        for log in self._logs:
+            log.close()
+        return out
+
+    @staticmethod
+    def _stop_group(procs: dict, end: float) -> dict:
+        for p in procs.values():
             if p.poll() is None:
                 try:
                     os.killpg(p.pid, signal.SIGINT)
                 except ProcessLookupError:
                     pass
-        end = time.monotonic() + timeout
         out = {}
-        for name, p in self.procs.items():
+        for name, p in procs.items():
             try:
                 _, err = p.communicate(timeout=max(0.1, end - time.monotonic()))
             except subprocess.TimeoutExpired:
                 os.killpg(p.pid, signal.SIGKILL)
                 _, err = p.communicate()
             out[name] = (p.returncode, err or '')
-        for log in self._logs:
-            log.close()
         return out
 
     def __enter__(self):

@@ -18,6 +18,7 @@ NODE_FILES = {
     'switch_manager': ['plant.yaml', 'switch_manager.yaml'],
     'sweep': ['plant.yaml', 'sweep.yaml'],
     'hardware_bridge': ['plant.yaml', 'hardware_bridge.yaml'],
+    'recorder': ['recorder.yaml'],
 }
 
 

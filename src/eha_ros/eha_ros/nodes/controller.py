@@ -55,6 +55,7 @@ def make_node(params: dict):
             self.tripped = False
             self.last_seq = 0
             self.last_speed = 0.0
+            self.answer = None                  # (seq, speed, saturated, stamp) of the last command
             self.active_channel = None
             self.pending = deque(maxlen=2000)   # tick-locked references waiting for their tick
             self.ref_seq = 0                    # newest tick-locked reference seen
@@ -127,6 +128,13 @@ def make_node(params: dict):
                 self.process_estimate(self.held.popleft()[1])
 
         def process_estimate(self, msg):
+            if self.lockstep and self.answer is not None and self.answer[0] == msg.seq and \
+                    not msg.stale:
+                # a re-sent estimate (the lock-step plant re-sends a state while it waits):
+                # the same command again, controller state untouched (deterministic runs)
+                self.c.bump('repeated_estimates')
+                self.send(*self.answer)
+                return
             t0 = time.perf_counter()
             now = clock_s(self)
             self.loop.arrived(now)
@@ -150,6 +158,7 @@ def make_node(params: dict):
             else:
                 speed, saturated = self.last_speed, False    # short gap: hold
             self.send(msg.seq, speed, saturated, msg.header.stamp)
+            self.answer = (msg.seq, speed, saturated, msg.header.stamp)
             self.loop.executed(time.perf_counter() - t0)
 
         def send(self, seq, speed, saturated, stamp=None):
