@@ -12,6 +12,7 @@ _REGISTRY = {
     'controller': ('eha_ros.core.controller.params', 'SCHEMA'),
     'switch_manager': ('eha_ros.core.redundancy.params', 'SCHEMA'),
     'sweep': ('eha_ros.core.sweep.params', 'SCHEMA'),
+    'hardware_bridge': ('eha_ros.core.bridge.params', 'SCHEMA'),
 }
 
 
