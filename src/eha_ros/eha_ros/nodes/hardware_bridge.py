@@ -28,16 +28,10 @@ from . import diag
 from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
 
 
-def other_state_publishers(node, topic: str) -> list[str]:
-    """Nodes other than ``node`` that publish ``topic``."""
-    me = node.get_fully_qualified_name()
-    out = []
-    for info in node.get_publishers_info_by_topic(topic):
-        ns = info.node_namespace.rstrip('/')
-        name = f'{ns}/{info.node_name}'
-        if name != me:
-            out.append(name)
-    return out
+def state_publishers(node, topic: str) -> list[str]:
+    """Fully qualified names of the nodes publishing ``topic`` (the bridge's own included)."""
+    return [f'{info.node_namespace.rstrip("/")}/{info.node_name}'
+            for info in node.get_publishers_info_by_topic(topic)]
 
 
 def make_node(params: dict):
@@ -112,8 +106,14 @@ def make_node(params: dict):
             """Another plant (plant_sim or a second bridge) on eha/state: refuse to start."""
             end = time.monotonic() + wait
             while True:
-                others = other_state_publishers(self, self.state_topic)
+                others = state_publishers(self, self.state_topic)    # ours does not exist yet
                 if others:
+                    names_by = time.monotonic() + 1.0     # discovery may not know the names yet
+                    while any('_UNKNOWN_' in n for n in others) and time.monotonic() < names_by:
+                        time.sleep(0.05)
+                        others = state_publishers(self, self.state_topic) or others
+                    others = [n if '_UNKNOWN_' not in n else 'a node not yet named'
+                              for n in others]
                     raise UsageError(f'{self.state_topic} is already published by '
                                      f'{", ".join(others)}: refusing to start a second plant '
                                      f'(stop it first)')
@@ -151,16 +151,22 @@ def make_node(params: dict):
                 else:
                     ok, text = self.safety.arm() if req.data else self.safety.disarm('requested')
             resp.success, resp.message = bool(ok), text
-            (self.get_logger().info if ok else self.get_logger().warning)(f'arm={req.data}: '
-                                                                         f'{text}')
+            self.log(ok, f'arm={req.data}: {text}')
             return resp
 
         def on_reset(self, req, resp):
             with self.lock:
                 ok, text = self.safety.reset()
             resp.success, resp.message = bool(ok), text
-            (self.get_logger().info if ok else self.get_logger().warning)(f'reset: {text}')
+            self.log(ok, f'reset: {text}')
             return resp
+
+        def log(self, ok: bool, text: str):
+            """Info when done, warning when refused (rclpy wants one severity per call site)."""
+            if ok:
+                self.get_logger().info(text)
+            else:
+                self.get_logger().warning(text)
 
         # ---- I/O thread ----
         def on_connected(self, command_block: dict):
@@ -355,7 +361,8 @@ def make_node(params: dict):
 
         # ---- diagnostics (executor thread) ----
         def publish_diagnostics(self):
-            others = other_state_publishers(self, self.state_topic)
+            names = state_publishers(self, self.state_topic)
+            others = names if len(names) > 1 else []                 # ours is one of them
             with self.lock:
                 if others and not self.conflict:
                     self.conflict = f'{self.state_topic} also published by {", ".join(others)}'

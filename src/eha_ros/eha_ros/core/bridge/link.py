@@ -24,6 +24,16 @@ ADSERR_SYMBOLNOTFOUND = 0x710          # 1808
 ADS_TYPE_NAMES = {v[1]: k for k, v in PLC_TYPES.items()}
 
 
+def quiet_adslib(level: int = 2):
+    """AdsLib logs to stderr from its own threads ('Info: connection closed by remote'):
+    keep warnings and errors only (Logger::logLevel: 0 verbose, 1 info, 2 warn, 3 error)."""
+    try:
+        from pyads.pyads_ex import _adsDLL
+        ctypes.c_size_t.in_dll(_adsDLL, '_ZN6Logger8logLevelE').value = level
+    except (ImportError, ValueError, AttributeError):  # pragma: no cover - other AdsLib build
+        pass
+
+
 class LinkError(Exception):
     """The PLC did not answer (timeout, refused, closed) or answered with an ADS error."""
 
@@ -67,6 +77,7 @@ class AdsLink:
         """Open the route, check every symbol, build the cyclic request; returns the PLC's
         current command block {role: SI value} (so the bridge starts from what is there)."""
         import pyads
+        quiet_adslib()
         self.close()
         conn = pyads.Connection(self.ams_net_id, self.ams_port, f'{self.host}:{self.tcp_port}')
         try:

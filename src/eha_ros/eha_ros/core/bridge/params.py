@@ -37,7 +37,7 @@ NODE = Schema('hardware_bridge', [
     Param('bridge.arm_at_start', 'bool', '', False,
           doc='arm by itself once the arming preconditions first hold (explicit operator '
               'choice; default: arm through /eha/bridge/arm)'),
-    Param('bridge.startup_discovery', 'float', 's', 1.0, 0.0, 30.0,
+    Param('bridge.startup_discovery', 'float', 's', 2.0, 0.0, 30.0,
           doc='wait this long for other /eha/state publishers before refusing or starting'),
     Param('bridge.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
 ])
