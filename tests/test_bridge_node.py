@@ -5,17 +5,14 @@ link dropped and restored (latched, reported, reset), bad symbol maps, a second 
 Timing assertions leave room for a loaded 2-core machine; the figures are printed."""
 import os
 import subprocess
-import threading
 import time
 
 import numpy as np
 import pytest
-import yaml
 
 from eha_ros.core.batch import node_params
 from eha_ros.core.bridge.peer import AdsPeer
 from eha_ros.core.bridge.symbols import load_symbol_map
-from eha_ros.core.params import default_config_dir
 from eha_ros.core.plant_sim_params import SCHEMA as SIM
 from eha_ros.stack import node_command
 from ros_util import start_process, stop_process, wait_for

@@ -12,7 +12,6 @@ Refuses to start while another node publishes eha/state.
 """
 from __future__ import annotations
 
-import math
 import sys
 import threading
 import time
@@ -60,6 +59,7 @@ def make_node(params: dict):
                                 p['ads.sum_mode'])
             self.lock = threading.Lock()
             self.go = threading.Event()
+            self.go_seq = -1                         # lock-step: the tick command(k) came for
             self.k = 0
             self.values = None                       # latest state block {role: SI}
             self.select = None                       # (channel, en0, en1, v0, v1, bypass)
@@ -130,6 +130,7 @@ def make_node(params: dict):
             with self.lock:
                 self.safety.set_command(msg.motor_speed_ref, self.now())
                 if self.lockstep and msg.seq == self.k:
+                    self.go_seq = msg.seq
                     self.go.set()
 
         def on_select(self, msg):
@@ -256,7 +257,9 @@ def make_node(params: dict):
                         self.publish_state(valid=self.staleness.fresh(self.now()))
                     continue
                 self.go.clear()
-                if self.running:
+                with self.lock:
+                    due = self.go_seq == self.k       # a late duplicate of an older command: no
+                if self.running and due:
                     self.cycle(self.Ts)
 
         def first_read(self):
@@ -296,8 +299,10 @@ def make_node(params: dict):
             try:
                 raw = self.link.cycle(self.smap.encode_write(block))
             except LinkError as err:
+                read_ok = False
                 self.link_failed(err)
             else:
+                read_ok = True
                 self.fails = 0
                 self.take_values(raw)
             if self.lockstep and not self.connected:
@@ -305,7 +310,8 @@ def make_node(params: dict):
             self.k += 1
             with self.lock:
                 self.safety.set_data(self.staleness.fresh(self.now()), self.safety.drive_fault)
-                valid = self.safety.fresh and self.connected
+                # lock-step: a cycle without a read repeats old data, invalid at once
+                valid = self.safety.fresh and self.connected and (read_ok or not self.lockstep)
             self.publish_state(valid)
             self.exec_time.add(time.perf_counter() - t0)
 

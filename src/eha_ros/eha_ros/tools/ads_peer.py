@@ -14,7 +14,6 @@ also serves /eha/inject_fault (eha_msgs/InjectFault, as plant_sim) and takes
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import sys
 import threading
