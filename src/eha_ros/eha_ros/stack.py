@@ -14,6 +14,9 @@ import time
 from .core.batch import NODE_FILES
 from .core.params import default_config_dir
 
+# plant-side nodes: their own lock-step switch (they publish /clock); the others use sim time
+LOCKSTEP_PARAM = {'plant_sim': 'plant_sim:sim_node.lockstep:=true',
+                  'hardware_bridge': 'hardware_bridge:bridge.lockstep:=true'}
 
 
 def cpu_seconds(pid: int) -> float:
@@ -74,8 +77,8 @@ class Stack:
         if lockstep:           # the plant steps per command and publishes /clock; others follow it
             for name in self.nodes:
                 self.extra.setdefault(name, [])
-                self.extra[name] += (['-p', 'plant_sim:sim_node.lockstep:=true']
-                                     if name == 'plant_sim' else ['-p', 'use_sim_time:=true'])
+                self.extra[name] += (['-p', LOCKSTEP_PARAM[name]] if name in LOCKSTEP_PARAM
+                                     else ['-p', 'use_sim_time:=true'])
         if record:
             self.extra.setdefault('recorder', [])
             self.extra['recorder'] += ['-p', f'recorder:recorder.output:={record}']

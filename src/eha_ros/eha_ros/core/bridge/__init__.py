@@ -1,0 +1,1 @@
+"""Hardware bridge core (issue 9): ADS symbol map, link, safety logic and the test peer."""
