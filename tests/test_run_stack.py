@@ -52,6 +52,7 @@ def test_a_node_that_dies_is_reported(tmp_path):
     (['-p', 'plant_sim:no_separator'], 'expected node:key:=value'),
     (['--mode', 'lockstep', '--structure', 'composed'], 'real time only'),
     (['--duration', '-1'], 'must be positive'),
+    (['--no-peer'], 'only applies to --plant bridge'),
 ])
 def test_bad_options_are_one_line(tmp_path, args, expect):
     r, folder, summary = run_stack(tmp_path, *args, timeout=60)
@@ -59,3 +60,17 @@ def test_bad_options_are_one_line(tmp_path, args, expect):
     lines = [ln for ln in r.stderr.splitlines() if not ln.startswith('setup:')]
     assert len(lines) == 1 and expect in lines[0], r.stderr
     assert summary is None
+
+
+def test_plant_swapped_for_the_bridge_and_the_ads_test_peer(tmp_path):
+    """--plant bridge changes only the plant side: ads_peer (the simulated PLC) + the bridge in
+    place of plant_sim, armed at start because the PLC is the simulated one."""
+    r, folder, summary = run_stack(tmp_path, '--plant', 'bridge', '--duration', '6')
+    assert r.returncode == 0, r.stdout[-1500:] + r.stderr[-1500:]
+    assert set(summary['exit_codes']) == {'ads_peer', 'eha_loop'}
+    assert '--plant bridge' in summary['processes']['eha_loop']
+    link = summary['diagnostics']['hardware_bridge: link']
+    assert link['armed'] is True and link['link_up'] is True and link['ticks'] > 500
+    assert 'plant_sim: loop' not in summary['diagnostics']
+    for node in ('estimator', 'controller', 'switch_manager'):
+        assert any(k.startswith(node) for k in summary['diagnostics']), node

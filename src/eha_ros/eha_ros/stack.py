@@ -66,10 +66,13 @@ class Stack:
     first and stops last, after the other nodes have exited, so their last messages are in."""
 
     def __init__(self, nodes, config_dir=None, extra=None, log_dir=None, env=None,
-                 lockstep: bool = False, composed: bool = False, record: str | None = None):
+                 lockstep: bool = False, composed: bool = False, record: str | None = None,
+                 ads_peer: bool = False):
         if composed and lockstep:
             raise ValueError('lock-step runs every node as its own process')
         self.nodes = list(nodes)
+        self.ads_peer = ads_peer       # start the ADS test peer (plant behind ADS) for the bridge
+        self.lockstep = lockstep
         self.composed = [n for n in self.nodes if n in LOOP_NODES] if composed else []
         self.record = record
         self.config_dir = config_dir
@@ -91,6 +94,10 @@ class Stack:
     def commands(self) -> dict:
         """{process name: command line} of what start() runs (the recorder first)."""
         cmds = {}
+        if self.ads_peer:
+            cmds['ads_peer'] = [sys.executable, '-m', 'eha_ros.tools.ads_peer'] + \
+                (['--config', self.config_dir] if self.config_dir else []) + \
+                (['--lockstep'] if self.lockstep else [])
         if self.record and 'recorder' not in self.nodes:
             cmds['recorder'] = node_command('recorder', self.config_dir,
                                             self.extra.get('recorder', ()))

@@ -144,10 +144,3 @@ def node_kwargs() -> dict:
     """Keyword arguments for rclpy Node so params-file keys show up as overrides."""
     return dict(automatically_declare_parameters_from_overrides=False,
                 allow_undeclared_parameters=False)
-
-
-def not_implemented(name: str, issue: int) -> int:
-    """Executables whose node is not built yet say so plainly."""
-    print(f'{name}: error: this node is not implemented yet (tracked in issue {issue})',
-          file=sys.stderr)
-    return 3

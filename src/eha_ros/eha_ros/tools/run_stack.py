@@ -43,6 +43,9 @@ def parse(argv):
                     help='also run the sweep node (config/sweep.yaml); stop when it finishes')
     ap.add_argument('--record', action='store_true',
                     help='record every /eha topic to out/stack/<run>/recording.mcap')
+    ap.add_argument('--no-peer', action='store_true',
+                    help='--plant bridge: do not start the ADS test peer (a real PLC answers at '
+                         'ads.host/ads.tcp_port); arming is then explicit: /eha/bridge/arm')
     ap.add_argument('--no-switch-manager', action='store_true',
                     help='leave the switch manager out (channel A drives throughout)')
     ap.add_argument('-p', dest='params', action='append', default=[], metavar='NODE:KEY:=VALUE',
@@ -80,7 +83,12 @@ def plan(args) -> dict:
             raise UsageError(f'-p {item!r}: node {node!r} is not in this stack '
                              f'({", ".join(nodes)})')
         extra.setdefault(node, []).extend(['-p', item])
-    return {'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant}
+    if args.no_peer and args.plant != 'bridge':
+        raise UsageError('--no-peer only applies to --plant bridge')
+    peer = args.plant == 'bridge' and not args.no_peer
+    if peer:                      # the simulated PLC: arm as soon as the preconditions hold
+        extra.setdefault(plant, []).extend(['-p', 'hardware_bridge:bridge.arm_at_start:=true'])
+    return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant}
 
 
 def wait_for_loop(stack, monitor, plant: str, timeout: float) -> str:
@@ -97,7 +105,7 @@ def wait_for_loop(stack, monitor, plant: str, timeout: float) -> str:
 
 
 def loop_status(monitor, plant: str) -> dict:
-    return monitor.find(f'{plant}: loop')
+    return monitor.find(f'{plant}: ')
 
 
 def progress_line(elapsed: float, loop: dict, cpu: dict) -> str:
@@ -127,7 +135,8 @@ def run(args) -> int:
             ['-p', f'sweep:sweep.out_dir:={out}', '-p', 'sweep:sweep.run_name:=sweep'])
     stack = Stack(p['nodes'], args.config, extra=extra, log_dir=logs,
                   lockstep=args.mode == 'lockstep', composed=p['structure'] == 'composed',
-                  **({'record': os.path.join(out, 'recording.mcap')} if args.record else {}))
+                  record=os.path.join(out, 'recording.mcap') if args.record else None,
+                  ads_peer=p['peer'])
     monitor = DiagMonitor()
     stack.start()
     print(f'run_stack: {args.mode}, {p["structure"]}: started '
@@ -173,7 +182,8 @@ def run(args) -> int:
                'stop_reason': reason, 'wall_s': elapsed, 'exit_codes': codes,
                'cpu_share': cpu_share, 'diagnostics': diagnostics}
     write_json(os.path.join(out, 'stack.json'), summary, sort_keys=True)
-    print(progress_line(elapsed, diagnostics.get(f'{p["plant"]}: loop', {}), cpu_share))
+    print(progress_line(elapsed, next((v for k, v in sorted(diagnostics.items())
+                                       if k.startswith(f'{p["plant"]}: ')), {}), cpu_share))
     bad = {n: c for n, c in codes.items() if c not in (0, None)}
     print(f'run_stack: stopped ({reason}) after {elapsed:.1f} s; '
           f'{"exit codes " + str(bad) if bad else "all processes exited cleanly"}; '
