@@ -81,7 +81,15 @@ def test_reference_moves_the_piston_and_node_diagnostics(listener):
     assert wait_for(lambda: max(listener.truth) > k0 + 1500, 60)
     x = np.array([listener.truth[k] for k in sorted(listener.truth) if k > k0 + 1000])
     assert abs(np.median(x) - 0.004) < 2e-4, np.median(x)
-    assert wait_for(lambda: {'plant_sim: loop', 'controller: loop'} <= set(listener.diags), 10)
+    names = {'plant_sim: loop', 'controller: loop', 'estimator: filter /',
+             'switch_manager: redundancy'}
+    assert wait_for(lambda: names <= set(listener.diags), 10), set(listener.diags)
+    for name in names:                     # per-node loop statistics (issue 10)
+        d = listener.diags[name]
+        for key in ('period_mean_s', 'period_p99_s', 'period_max_s', 'exec_mean_s',
+                    'exec_p99_s', 'overruns'):
+            assert key in d, (name, key)
+        assert 0.9e-3 < d['period_mean_s'] < 1.5e-3, (name, d['period_mean_s'])
     plant = listener.diags['plant_sim: loop']
     # the in-process answer comes within the tick (a loop-thread stall may delay one)
     assert plant['answers'] > 1000 and plant['latency_p50_s'] < 1e-3
