@@ -6,7 +6,8 @@ back to A): at the default 10 s, 3 s and 6 s.
 
 Reported (flat keys, SI units): simulated s per wall s and per CPU s of this process (min /
 median / max over repeats; the machine is shared, see load_avg_*), us per tick, the
-compile time (cold: a fresh process with an empty numba cache; warm: loading the cache), the
+compile time (cold: a fresh process with an empty numba cache, wall and CPU; warm: loading
+the cache), the set-up time (configuration, objects, reference arrays), the
 tick-by-tick Python reference path for comparison, and per-component us/tick of the
 compiled steppers replaying the recorded run (plant, estimator, controller, switch manager).
 
@@ -16,6 +17,7 @@ compiled steppers replaying the recorded run (plant, estimator, controller, swit
 from __future__ import annotations
 
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -79,19 +81,23 @@ def spread(prefix: str, values) -> dict:
             f'{prefix}_max': v[-1]}
 
 
-def cold_compile_s() -> float:
-    """Wall time of the first closed-loop run in a fresh process with an empty numba cache."""
+def cold_compile_s() -> tuple:
+    """(wall s, CPU s) of the first closed-loop run in a fresh process with an empty numba
+    cache: import, set-up and compiling every kernel."""
     code = ('import time; t0 = time.perf_counter(); '
             'from eha_ros.bench.batch import build, scenario; '
             'loop, r, f = build(scenario(0.05)); loop.run(r, f); '
             'print(time.perf_counter() - t0)')
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         out = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
                              text=True, timeout=1800)
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if out.returncode != 0:
         raise RuntimeError(f'cold compile run failed: {out.stderr.strip()[-300:]}')
-    return float(out.stdout.strip().splitlines()[-1])
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return float(out.stdout.strip().splitlines()[-1]), cpu
 
 
 def run(args=None) -> dict:
@@ -100,13 +106,14 @@ def run(args=None) -> dict:
     res = {'batch_simulated_s': duration, 'batch_repeats': repeats,
            'load_avg_1min_before': os.getloadavg()[0]}
     if _get(args, 'cold_compile', True):
-        res['batch_jit_cold_compile_s'] = cold_compile_s()
+        res['batch_jit_cold_compile_s'], res['batch_jit_cold_compile_cpu_s'] = cold_compile_s()
     # warm: load the cached kernels (first call per signature), not counted below
     loop, refs, loads = build(scenario(0.05))
     _, res['batch_jit_warm_load_s'], _ = timed(lambda: loop.run(refs, loads))
-    walls, cpus, fractions, rec = [], [], [], None
+    walls, cpus, fractions, setups, rec = [], [], [], [], None
     for _ in range(repeats):
-        loop, refs, loads = build(scenario(duration))
+        (loop, refs, loads), setup, _ = timed(lambda: build(scenario(duration)))
+        setups.append(setup)
         time.sleep(0.2)               # BLAS threads of the set-up (scipy) go idle
         rec, wall, cpu = timed(lambda: loop.run(refs, loads))
         walls.append(wall)
@@ -119,6 +126,7 @@ def run(args=None) -> dict:
     res.update(spread('batch_closed_loop_sim_s_per_wall_s', [duration / w for w in walls]))
     res.update(spread('batch_closed_loop_sim_s_per_cpu_s', [duration / c for c in cpus]))
     res.update(spread('batch_closed_loop_us_per_tick', [w / n * 1e6 for w in walls]))
+    res['batch_setup_s_median'] = statistics.median(setups)   # config, objects, references
     res['batch_compiled_tick_fraction'] = min(fractions)
     res['batch_python_ticks'] = int(round((1 - min(fractions)) * n))
     # end to end: core.redundancy.batch.run (config, objects, references, loop, columns)

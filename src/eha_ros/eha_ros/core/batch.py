@@ -197,12 +197,16 @@ class BatchLoop:
         k, end = k0, k0 + n
         fast = fast and self.fast_supported()
         scheduled = sorted(set(self.faults) | set(self.commands))
+        retry, wait = k, 1           # back off while segments stop at once (e.g. a stuck sensor)
         while k < end:
             stop = min([s for s in scheduled if s >= k] + [end])
-            if fast and k < stop and self._ready():
+            if fast and retry <= k < stop and self._ready():
+                start = k
                 k = self._segment(k, stop, k0, refs, loads, rec)
                 if k >= end:
                     break
+                wait = 1 if k > start else min(2 * wait, 64)
+                retry = k + 1 if k > start else k + wait
             self.tick(k, refs[k - k0], loads[k - k0], rec[k - k0])
             k += 1
         return rec
@@ -213,7 +217,9 @@ class BatchLoop:
 
     def _ready(self) -> bool:
         """Cheap Python-side check before packing: nothing that surely needs a Python tick."""
-        return (self.est is None or self.est.started) and self.ctl.started
+        est = self.est
+        return (est is None or (est.started and est._saved is None and
+                                not (est.isolate and est.detector.code))) and self.ctl.started
 
     def _segment(self, k: int, stop: int, off: int, refs, loads, rec) -> int:
         """Compiled ticks k .. stop-1 until one needs Python; returns that tick (or stop)."""
