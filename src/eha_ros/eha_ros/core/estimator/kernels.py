@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def mul(A, B, out, C, sub, trans_b, sym):
     """out = C -/+ A op(B) (op(B) = B' if trans_b; C None = 0), each entry summed in index
     order from C; sym: only the upper triangle is computed and mirrored."""
@@ -32,7 +32,7 @@ def mul(A, B, out, C, sub, trans_b, sym):
                 out[j, i] = s
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def mulv(A, v, out, c, sub):
     """out = c -/+ A v (c None = 0), each entry summed in index order from c."""
     for i in range(out.shape[0]):
@@ -48,7 +48,7 @@ def mulv(A, v, out, c, sub):
 @njit(cache=True)
 def predict(x, P, F, G, u, Q, tmp):
     """x <- F x + G u (eq. 4.1); P <- F P F' + Q (eq. 4.2). ``tmp`` is n x n scratch."""
-    xn = np.empty(x.shape[0])
+    xn = tmp[0]                                # scratch row, free until F P below
     mulv(F, x, xn, None, False)
     mulv(G, u, xn, xn, False)
     x[:] = xn
