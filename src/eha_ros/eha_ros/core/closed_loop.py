@@ -55,10 +55,19 @@ NREC = 28
 
 @njit(cache=True)
 def _copy(src, dst):
-    a = src.ravel()
-    b = dst.ravel()
-    for i in range(a.shape[0]):
-        b[i] = a[i]
+    """dst <- src (same shape, 1 to 3 dimensions), no allocation."""
+    if src.ndim == 1:
+        for i in range(src.shape[0]):
+            dst[i] = src[i]
+    elif src.ndim == 2:
+        for i in range(src.shape[0]):
+            for j in range(src.shape[1]):
+                dst[i, j] = src[i, j]
+    else:
+        for i in range(src.shape[0]):
+            for j in range(src.shape[1]):
+                for m in range(src.shape[2]):
+                    dst[i, j, m] = src[i, j, m]
 
 
 @njit(cache=True)
