@@ -87,6 +87,8 @@ class DiscreteSS:
         self._dd = float(self.Dd[0, 0])
         self._ad = np.ascontiguousarray(self.Ad, dtype=float)
         self._tmp = np.zeros(self.n)
+        # compile (or load from cache) now, not on a node's first tick; state untouched
+        ss_step(self._ad, self._bd, self._cd, self._dd, self.x.copy(), 0.0, self._tmp)
 
     @classmethod
     def from_continuous(cls, abcd, Ts: float, prewarp_w: float | None = None) -> 'DiscreteSS':
