@@ -4,8 +4,11 @@ controller cores stepped tick by tick, with the same parameter files the nodes r
 Tick order as over DDS: state(k) -> estimate(k) -> command(k), applied by the plant at k+1."""
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
+
+import numpy as np
 
 from .params import default_config_dir, load
 
@@ -61,6 +64,7 @@ class BatchStack:
         self.controller = PositionController.from_params(c)
         self.Ts = self.plant.Ts
         self.k = 0
+        self._loop = None
 
     def tick(self, reference: float, load: float = 0.0) -> Tick:
         m = self.plant.measure()
@@ -74,3 +78,198 @@ class BatchStack:
         self.plant.step(out.speed_ref, load)
         self.k += 1
         return rec
+
+    def run(self, references, loads=None, fast: bool = True) -> dict:
+        """Ticks self.k .. self.k + n - 1 for arrays of n references (and loads), what n
+        :meth:`tick` calls do, in compiled segments (BatchLoop): arrays named as Tick's fields."""
+        from .closed_loop import R_CHANNEL, R_U, R_WM, R_X0, R_XHAT, R_XM
+        if self._loop is None:
+            self._loop = BatchLoop(self.plant, self.estimator, self.controller)
+        refs = np.ascontiguousarray(references, dtype=float)
+        rec = self._loop.run(refs, loads, fast=fast, k0=self.k).T
+        out = {'seq': np.arange(self.k, self.k + len(refs)), 'reference': refs.copy(),
+               'measured': rec[R_XM].copy(), 'estimate': rec[R_XHAT].copy(),
+               'truth': rec[R_X0].copy(), 'command': rec[R_U].copy(),
+               'motor_speed_0': rec[R_WM].copy(), 'motor_speed_1': rec[R_WM + 1].copy(),
+               'active_channel': rec[R_CHANNEL].astype(int)}
+        self.k += len(refs)
+        return out
+
+
+class BatchLoop:
+    """Plant + estimator (or None: the loop closes on the measurement) + position controller
+    + switch manager (or None) in one process, tick by tick or fast.
+
+    :meth:`tick` is the reference semantics, what the nodes do (the loop body of
+    core.redundancy.batch.run); :meth:`run` with ``fast=True`` advances the ticks where
+    nothing event-like happens in compiled segments (core.closed_loop) and does every other
+    tick -- scheduled faults and commands, a monitor verdict the state machine acts on, a
+    switch's valve/drive steps, rejected measurements -- with :meth:`tick`. Both give the same
+    numbers, bit for bit (tests/test_batch_fast.py).
+    """
+
+    def __init__(self, plant, estimator, controller, manager=None, hold_ticks: int = 0,
+                 faults=None, commands=None):
+        """faults: {tick: [(name, channel, magnitude, duration), ...]} injected at the tick's
+        start; commands: {tick: [(channel, reason), ...]} to the manager after the estimate."""
+        self.plant, self.est, self.ctl, self.mgr = plant, estimator, controller, manager
+        self.hold_ticks = hold_ticks
+        self.faults = {int(k): list(v) for k, v in (faults or {}).items()}
+        self.commands = {int(k): list(v) for k, v in (commands or {}).items()}
+        if self.commands and manager is None:
+            raise ValueError('commands need a switch manager')
+        self.Ts = plant.Ts
+        self.u = 0.0                       # latest command (rad/s)
+        self.applied = None                # latest channel select applied to the plant
+        self.last_status = (manager.active, manager.state) if manager is not None else None
+        self.responses = []                # (tick, 'fault' | 'command', (ok, message))
+        self.segments = self.fast_ticks = 0
+
+    # ------------------------------------------------------------------ reference tick
+    def tick(self, k: int, reference: float, load: float, row) -> None:
+        """Tick k as the stack does it; writes its record ``row`` (core.closed_loop R_*)."""
+        from .closed_loop import (R_ACTIVE, R_BYPASS, R_CHANNEL, R_EN, R_FAULT, R_I, R_IM,
+                                  R_INNOV, R_NIS, R_NISDIM, R_PM, R_STATE, R_T, R_U, R_VALVE,
+                                  R_W, R_WM, R_X, R_X0, R_XHAT, R_XM)
+        from .redundancy.health import ChannelSample
+        plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
+        t = k * self.Ts
+        for f in self.faults.get(k, ()):
+            self.responses.append((k, 'fault', plant.inject_fault(*f)))
+        m = plant.measure()
+        x0 = plant.position
+        if est is not None:
+            r = est.update(m.position, m.motor_speed, m.pressure_a, m.pressure_b,
+                           m.active_channel)
+            x_hat, nis, innov = r.position, r.nis, r.innovation
+            code, nd = r.sensor_fault, r.nis_dim
+            est_ok = r.nis_dim > 0 and not r.sensor_fault
+        else:
+            x_hat, nis, est_ok, innov, code, nd = m.position, math.nan, False, math.nan, 0, 0
+        ctl.request(reference)
+        for ch, why in self.commands.get(k, ()):
+            self.responses.append((k, 'command', mgr.request(ch, why)))
+        if mgr is not None:
+            s = ChannelSample(t, self.u, tuple(m.motor_speed), tuple(m.motor_current),
+                              m.pressure_a, m.pressure_b, tuple(m.drive_enabled),
+                              tuple(m.drive_fault), m.valid, innov, est_ok)
+            mgr.update(s, k)
+            if mgr.select != self.applied:     # also after a request() earlier in this tick
+                self.applied = sel = mgr.select
+                plant.select(sel.channel, sel.drive_enable, sel.valve_open, sel.bypass_open)
+            status, last = (mgr.active, mgr.state), self.last_status
+            if status != last and (status[0] != last[0] or mgr.state == 'SWITCHING'):
+                ctl.hold_integrator(self.hold_ticks)   # as the controller node on /eha/redundancy
+            self.last_status = status
+        u = ctl.update(x_hat).speed_ref
+        plant.step(u, load)
+        self.u = u
+        tr = plant.truth()
+        row[R_T], row[R_X], row[R_X0], row[R_XM], row[R_XHAT] = plant.t, tr.position, x0, \
+            m.position, x_hat
+        row[R_U], row[R_NIS], row[R_INNOV], row[R_FAULT], row[R_NISDIM] = u, nis, innov, code, nd
+        row[R_W:R_W + 2], row[R_WM:R_WM + 2], row[R_I:R_I + 2] = \
+            tr.motor_speed, m.motor_speed, tr.motor_current
+        row[R_VALVE:R_VALVE + 2], row[R_BYPASS] = tr.valve_fraction, tr.bypass_fraction
+        row[R_EN:R_EN + 2] = plant.measure().drive_enabled
+        row[R_CHANNEL] = m.active_channel
+        row[R_PM], row[R_PM + 1], row[R_IM:R_IM + 2] = m.pressure_a, m.pressure_b, m.motor_current
+        if mgr is not None:
+            from .redundancy.batch import STATE_CODES
+            row[R_ACTIVE], row[R_STATE] = mgr.active, STATE_CODES[mgr.name]
+        else:
+            row[R_ACTIVE] = row[R_STATE] = m.active_channel
+
+    # ------------------------------------------------------------------ fast run
+    def run(self, references, loads=None, fast: bool = True, k0: int = 0):
+        """Ticks k0 .. k0+n-1 with references[i], loads[i] (arrays of n); returns the
+        (n, NREC) record (core.closed_loop R_* columns, row i = tick k0 + i)."""
+        from .closed_loop import NREC
+        refs = np.ascontiguousarray(references, dtype=float)
+        n = len(refs)
+        loads = np.zeros(n) if loads is None else np.ascontiguousarray(loads, dtype=float)
+        if loads.shape != refs.shape:
+            raise ValueError(f'{len(loads)} loads for {n} references: expected as many')
+        rec = np.zeros((n, NREC))
+        k, end = k0, k0 + n
+        fast = fast and self.fast_supported()
+        scheduled = sorted(set(self.faults) | set(self.commands))
+        retry, wait = k, 1           # back off while segments stop at once (e.g. a stuck sensor)
+        while k < end:
+            stop = min([s for s in scheduled if s >= k] + [end])
+            if fast and retry <= k < stop and self._ready():
+                start = k
+                k = self._segment(k, stop, k0, refs, loads, rec)
+                if k >= end:
+                    break
+                wait = 1 if k > start else min(2 * wait, 64)
+                retry = k + 1 if k > start else k + wait
+            self.tick(k, refs[k - k0], loads[k - k0], rec[k - k0])
+            k += 1
+        return rec
+
+    def fast_supported(self) -> bool:
+        from .estimator import stepper as ES
+        return self.est is None or ES.supported(self.est)
+
+    def _ready(self) -> bool:
+        """Cheap Python-side check before packing: nothing that surely needs a Python tick."""
+        est = self.est
+        return (est is None or (est.started and est._saved is None and
+                                not (est.isolate and est.detector.code))) and self.ctl.started
+
+    def _segment(self, k: int, stop: int, off: int, refs, loads, rec) -> int:
+        """Compiled ticks k .. stop-1 until one needs Python; returns that tick (or stop)."""
+        from . import closed_loop as CL
+        from .controller import stepper as CS
+        from .estimator import stepper as ES
+        from .plant import stepper as PS
+        from .plant.layout import NNOISE
+        from .plant.sensors import BLOCK
+        from .redundancy import stepper as RS
+        plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
+        packed = PS.pack(plant)
+        if packed is None:
+            return k
+        aux, ring, table = packed
+        ek, ee, est_arrays = ES.pack(est) if est is not None else _dummy_estimator()
+        ck, cc, ctl_arrays = CS.pack(ctl)
+        hk, mk, ms, hs, g = RS.pack(mgr) if mgr is not None else _dummy_manager()
+        u = self.u
+        noise = plant._noise
+        while True:
+            pl = (plant.S, plant._P, plant.U, plant._T, noise.block, plant._meas, aux, ring,
+                  table)
+            k0 = k
+            k, why, u = CL.segment(k, stop, off, self.Ts, refs, loads, pl, plant._nsub,
+                                   (ek, ee) + est_arrays, est is not None,
+                                   (ck, cc) + ctl_arrays, (hk, mk, ms, hs, g), mgr is not None,
+                                   u, rec)
+            self.segments += 1
+            self.fast_ticks += k - k0
+            if why != CL.NOISE:
+                break
+            noise.block = noise.rng.standard_normal((BLOCK, NNOISE))   # NoiseSource.next_index
+            aux[PS.A_NOISE_K] = 0
+        self.u = float(u)
+        PS.unpack(plant, aux, ring, table)
+        if est is not None:
+            ES.unpack(est, ee)
+        CS.unpack(ctl, cc)
+        if mgr is not None:
+            RS.unpack(mgr, ms, hs, g)
+        return k
+
+
+def _dummy_estimator():
+    """Arrays of the estimator stepper's types when the loop has no estimator."""
+    from .estimator import stepper as ES
+    v, m = np.zeros(2), np.zeros((2, 2))
+    return np.zeros(ES.NK), np.zeros(ES.NE), (v, m, m, m, v, m, m, m, m, v, m, m, m, v, m, v,
+                                             v, v, v)
+
+
+def _dummy_manager():
+    from .redundancy import stepper as RS
+    return (np.zeros(RS.NK), np.zeros((2, RS.NMON, 5)), np.zeros((2, RS.NMON, 3)),
+            np.zeros(RS.NH), np.zeros(RS.NG))

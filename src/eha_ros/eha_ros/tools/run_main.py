@@ -90,7 +90,10 @@ def run(args) -> int:
 
 
 def run_batch(args, p, plan, out) -> dict:
-    """Batch: the same core objects in one process, tick by tick."""
+    """Batch: the same core objects in one process (BatchStack.run: compiled segments that
+    give the numbers of tick-by-tick stepping)."""
+    import numpy as np
+
     from ..core.batch import BatchStack
     from ..core.sweep.session import SweepSession
     from ..nodes.sweep import model_overlay
@@ -103,21 +106,26 @@ def run_batch(args, p, plan, out) -> dict:
                            p['sweep.abort_ticks'], model, background_writes=False,
                            settle_periods=p['sweep.settle_periods'])
     warmup = int(round(0.5 / stack.Ts))
-    for _ in range(warmup):                      # let the estimator settle at the offset
-        stack.tick(plan.offset)
+    stack.run(np.full(warmup, plan.offset))      # let the estimator settle at the offset
     session.start(stack.k)
+    chunk = int(round(0.5 / stack.Ts))           # ticks per BatchStack.run (compiled segments)
     t0 = time.perf_counter()
     try:
         while stack.k - session.seq0 < plan.n_ticks:
-            k = stack.k
-            ref = session.reference_for(k)
-            r = stack.tick(ref)
+            k0 = stack.k
+            m = min(chunk, plan.n_ticks - (k0 - session.seq0))
+            r = stack.run([session.reference_for(k) for k in range(k0, k0 + m)])
+            done = m
+            for i, x_hat in enumerate(r['estimate']):   # same tick of abort as tick by tick
+                if session.check_error(k0 + i, float(x_hat)):
+                    done = i + 1
+                    break
             for col in ('reference', 'measured', 'estimate', 'truth', 'command',
                         'motor_speed_0', 'motor_speed_1', 'active_channel'):
-                session.record(col, k, getattr(r, col))
-            if session.check_error(k, r.estimate):
+                session.record_many(col, k0, r[col][:done])
+            if done < m:
                 break
-            for pt in session.progress(k):
+            for pt in session.progress(k0 + m - 1):
                 print(f'  {pt.freq_hz:6.2f} Hz: {pt.gain_db:7.2f} dB {pt.phase_deg:7.1f} deg '
                       f'coherence {pt.coherence:.4f}', flush=True)
     except KeyboardInterrupt:

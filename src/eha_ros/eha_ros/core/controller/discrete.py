@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 
 def tustin(A, B, C, D, Ts: float, prewarp_w: float | None = None):
@@ -45,6 +46,30 @@ def freqresp_z(Ad, Bd, Cd, Dd, w, Ts: float) -> np.ndarray:
     return out
 
 
+@njit(cache=True)
+def ss_output(cd, dd, x, u):
+    """y = C x + D u of a SISO state space (sum in index order)."""
+    s = 0.0
+    for i in range(x.shape[0]):
+        s += cd[i] * x[i]
+    return s + dd * u
+
+
+@njit(cache=True)
+def ss_step(Ad, bd, cd, dd, x, u, tmp):
+    """y[k] = C x + D u, then x <- A x + B u in place (``tmp`` n scratch); returns y[k]."""
+    y = ss_output(cd, dd, x, u)
+    n = x.shape[0]
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += Ad[i, j] * x[j]
+        tmp[i] = s + bd[i] * u
+    for i in range(n):
+        x[i] = tmp[i]
+    return y
+
+
 @dataclass
 class DiscreteSS:
     """x[k+1] = Ad x[k] + Bd u[k], y[k] = Cd x[k] + Dd u[k] (SISO), one call per tick."""
@@ -60,6 +85,10 @@ class DiscreteSS:
         self._bd = self.Bd[:, 0].copy()
         self._cd = self.Cd[0].copy()
         self._dd = float(self.Dd[0, 0])
+        self._ad = np.ascontiguousarray(self.Ad, dtype=float)
+        self._tmp = np.zeros(self.n)
+        # compile (or load from cache) now, not on a node's first tick; state untouched
+        ss_step(self._ad, self._bd, self._cd, self._dd, self.x.copy(), 0.0, self._tmp)
 
     @classmethod
     def from_continuous(cls, abcd, Ts: float, prewarp_w: float | None = None) -> 'DiscreteSS':
@@ -67,20 +96,19 @@ class DiscreteSS:
 
     def output(self, u: float) -> float:
         """y[k] for input u[k] without advancing the state."""
-        return float(self._cd @ self.x) + self._dd * u
+        return ss_output(self._cd, self._dd, self.x, float(u))
 
     def update(self, u: float) -> float:
-        """y[k] and advance the state with u[k]."""
-        y = float(self._cd @ self.x) + self._dd * u
-        self.x = self.Ad @ self.x + self._bd * u
-        return y
+        """y[k] and advance the state with u[k] (compiled, shared with core.closed_loop)."""
+        return ss_step(self._ad, self._bd, self._cd, self._dd, self.x, float(u), self._tmp)
 
     def reset(self):
         self.x[:] = 0.0
 
     def steady_state(self, u: float):
         """Put the state at the equilibrium for a constant input u (needs no pole at z = 1)."""
-        self.x = np.linalg.solve(np.eye(self.n) - self.Ad, self._bd * u)
+        self.x = np.ascontiguousarray(np.linalg.solve(np.eye(self.n) - self.Ad, self._bd * u),
+                                      dtype=float)
 
     def dc_gain(self) -> float:
         return float(self._cd @ np.linalg.solve(np.eye(self.n) - self.Ad, self._bd)) + self._dd

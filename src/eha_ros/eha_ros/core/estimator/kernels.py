@@ -1,9 +1,10 @@
 """Compiled Kalman filter steps shared by the filters: predict (eq. 4.1-4.2) and a Joseph-form
 update (eq. 4.4-4.6) with innovation and NIS, for small dense matrices (n <= 8, m <= 3).
 
-The arrays are updated in place so that one filter step allocates nothing but the m x m
-inverse; filterpy's KalmanFilter computes the same (its update() is the Joseph form too) and is
-used as the reference in the tests.
+The arrays are updated in place by one small product helper (:func:`mul`, :func:`mulv`);
+with a workspace (:func:`update_ws`) a filter step allocates nothing but the m x m inverse.
+filterpy's KalmanFilter computes the same (its update() is the Joseph form too) and is used as
+the reference in the tests.
 """
 from __future__ import annotations
 
@@ -11,32 +12,53 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline='always')
+def mul(A, B, out, C, sub, trans_b, sym):
+    """out = C -/+ A op(B) (op(B) = B' if trans_b; C None = 0), each entry summed in index
+    order from C; sym: only the upper triangle is computed and mirrored."""
+    n, m = out.shape
+    inner = A.shape[1]
+    for i in range(n):
+        for j in range(i if sym else 0, m):
+            s = 0.0 if C is None else C[i, j]
+            for k in range(inner):
+                p = A[i, k] * (B[j, k] if trans_b else B[k, j])
+                if sub:
+                    s -= p
+                else:
+                    s += p
+            out[i, j] = s
+            if sym:
+                out[j, i] = s
+
+
+@njit(cache=True, inline='always')
+def mulv(A, v, out, c, sub):
+    """out = c -/+ A v (c None = 0), each entry summed in index order from c."""
+    for i in range(out.shape[0]):
+        s = 0.0 if c is None else c[i]
+        for k in range(v.shape[0]):
+            if sub:
+                s -= A[i, k] * v[k]
+            else:
+                s += A[i, k] * v[k]
+        out[i] = s
+
+
 @njit(cache=True)
 def predict(x, P, F, G, u, Q, tmp):
     """x <- F x + G u (eq. 4.1); P <- F P F' + Q (eq. 4.2). ``tmp`` is n x n scratch."""
-    n = x.shape[0]
-    xn = np.empty(n)
-    for i in range(n):
-        s = 0.0
-        for j in range(n):
-            s += F[i, j] * x[j]
-        for j in range(u.shape[0]):
-            s += G[i, j] * u[j]
-        xn[i] = s
+    xn = tmp[0]                                # scratch row, free until F P below
+    mulv(F, x, xn, None, False)
+    mulv(G, u, xn, xn, False)
     x[:] = xn
-    for i in range(n):
-        for j in range(n):
-            s = 0.0
-            for k in range(n):
-                s += F[i, k] * P[k, j]
-            tmp[i, j] = s
-    for i in range(n):
-        for j in range(i, n):
-            s = Q[i, j]
-            for k in range(n):
-                s += tmp[i, k] * F[j, k]
-            P[i, j] = s
-            P[j, i] = s
+    mul(F, P, tmp, None, False, False, False)
+    mul(tmp, F, P, Q, False, True, True)
+
+
+def workspace_size(n: int, m: int) -> int:
+    """Scratch floats that :func:`update_ws` needs for n states and m measurements."""
+    return 3 * n * m + 2 * n * n + n
 
 
 @njit(cache=True)
@@ -45,71 +67,47 @@ def update(x, P, H, R, z, y, S):
     S = H P H' + R; returns the NIS y' S^-1 y. x and P are updated in place."""
     n = x.shape[0]
     m = z.shape[0]
-    PHt = np.empty((n, m))
-    for i in range(n):
-        for j in range(m):
-            s = 0.0
-            for k in range(n):
-                s += P[i, k] * H[j, k]
-            PHt[i, j] = s
-    for i in range(m):
-        s = z[i]
-        for k in range(n):
-            s -= H[i, k] * x[k]
-        y[i] = s
-        for j in range(m):
-            s = R[i, j]
-            for k in range(n):
-                s += H[i, k] * PHt[k, j]
-            S[i, j] = s
+    return update_ws(x, P, H, R, z, y, S, np.empty(3 * n * m + 2 * n * n + n))
+
+
+@njit(cache=True)
+def update_ws(x, P, H, R, z, y, S, ws):
+    """:func:`update` with preallocated scratch ``ws`` (>= workspace_size(n, m) floats)."""
+    n = x.shape[0]
+    m = z.shape[0]
+    o = 0
+    PHt = ws[o:o + n * m].reshape((n, m))
+    o += n * m
+    K = ws[o:o + n * m].reshape((n, m))
+    o += n * m
+    KR = ws[o:o + n * m].reshape((n, m))
+    o += n * m
+    IKH = ws[o:o + n * n].reshape((n, n))
+    o += n * n
+    T = ws[o:o + n * n].reshape((n, n))
+    o += n * n
+    dx = ws[o:o + n]
+    mul(P, H, PHt, None, False, True, False)
+    mulv(H, x, y, z, True)                     # y = z - H x
+    mul(H, PHt, S, R, False, False, False)     # S = R + H P H'
     Si = np.linalg.inv(S)
-    K = np.empty((n, m))
-    for i in range(n):
-        for j in range(m):
-            s = 0.0
-            for k in range(m):
-                s += PHt[i, k] * Si[k, j]
-            K[i, j] = s
+    mul(PHt, Si, K, None, False, False, False)
     nis = 0.0
     for i in range(m):
         for j in range(m):
             nis += y[i] * Si[i, j] * y[j]
+    mulv(K, y, dx, None, False)
     for i in range(n):
-        s = 0.0
-        for j in range(m):
-            s += K[i, j] * y[j]
-        x[i] += s
+        x[i] += dx[i]
     # Joseph form: P = (I - K H) P (I - K H)' + K R K'
-    IKH = np.empty((n, n))
     for i in range(n):
         for j in range(n):
-            s = 1.0 if i == j else 0.0
-            for k in range(m):
-                s -= K[i, k] * H[k, j]
-            IKH[i, j] = s
-    T = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            s = 0.0
-            for k in range(n):
-                s += IKH[i, k] * P[k, j]
-            T[i, j] = s
-    KR = np.empty((n, m))
-    for i in range(n):
-        for j in range(m):
-            s = 0.0
-            for k in range(m):
-                s += K[i, k] * R[k, j]
-            KR[i, j] = s
-    for i in range(n):
-        for j in range(i, n):
-            s = 0.0
-            for k in range(n):
-                s += T[i, k] * IKH[j, k]
-            for k in range(m):
-                s += KR[i, k] * K[j, k]
-            P[i, j] = s
-            P[j, i] = s
+            IKH[i, j] = 1.0 if i == j else 0.0
+    mul(K, H, IKH, IKH, True, False, False)
+    mul(IKH, P, T, None, False, False, False)
+    mul(K, R, KR, None, False, False, False)
+    mul(T, IKH, P, None, False, True, True)
+    mul(KR, K, P, P, False, True, True)
     return nis
 
 

@@ -30,6 +30,7 @@ import math
 
 from numba import njit
 
+from ..jit_cache import drop_stale
 from . import layout as L
 from .accumulator import pressure as acc_pressure
 from .chambers import stiffness
@@ -40,6 +41,8 @@ from .piston import end_stop
 from .pump import leakage
 from .sensors import sample
 from .valves import check_flow, ramp, relief_flow
+
+drop_stale(__file__)      # tick() inlines kernels of the other plant modules
 
 
 @njit(cache=True, error_model='numpy')

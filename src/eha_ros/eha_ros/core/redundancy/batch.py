@@ -12,7 +12,6 @@ import numpy as np
 
 from ..params import default_config_dir, load
 from ..plant import EhaPlant
-from .health import ChannelSample
 from .params import SCHEMA, check
 from .state_machine import SwitchManager
 
@@ -71,13 +70,18 @@ class Scenario:
 
 
 def run(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | None = None,
-        use_estimator: bool = True, switch_hold: float | None = None) -> dict:
+        use_estimator: bool = True, switch_hold: float | None = None, fast: bool = True) -> dict:
     """Closed loop with the switch manager; returns arrays (t, ref, x, x_meas, w[2], w_ref,
     valve[2], enable[2], bypass, active, state codes) plus the manager and the responses.
 
     switch_hold: the controller's integrator hold on a switch (control.switch_hold, s);
     None = as config/controller_node.yaml says. Like the controller node, the hold starts
-    when /eha/redundancy reports SWITCHING or a new active channel."""
+    when /eha/redundancy reports SWITCHING or a new active channel.
+    fast: compiled segments between events (core.batch.BatchLoop, same numbers); False: every
+    tick through the Python objects."""
+    from ..batch import BatchLoop
+    from ..closed_loop import (R_ACTIVE, R_BYPASS, R_EN, R_I, R_INNOV, R_NIS, R_STATE, R_T,
+                               R_U, R_VALVE, R_W, R_WM, R_X, R_XM)
     from ..plant.parameters import PLANT_SCHEMA
     plant = EhaPlant(load(PLANT_SCHEMA, [config('plant.yaml')], plant_overrides or {}),
                      seed=scn.seed)
@@ -88,66 +92,38 @@ def run(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | No
         hold_ticks = int(round(switch_hold / Ts))
     est = make_estimator() if use_estimator else None
     n = int(round(scn.duration / Ts))
-    cols = {k: np.zeros(n) for k in ('t', 'ref', 'x', 'x_meas', 'w_ref', 'bypass', 'nis', 'innov')}
-    cols.update({k: np.zeros((2, n)) for k in ('w', 'w_meas', 'valve', 'i')})
-    cols['enable'] = np.zeros((2, n), bool)
-    cols['active'] = np.zeros(n, int)
-    cols['state'] = np.zeros(n, int)
-    commands = sorted(scn.commands)
-    faults = sorted(scn.faults)
-    responses = []
-    u = 0.0
-    applied = None
-    last_status = (mgr.active, mgr.state)
-    for k in range(n):
-        t = k * Ts
-        while faults and faults[0][0] <= t + 1e-9:
-            _, name, ch, mag, dur = faults.pop(0)
-            responses.append((k, 'fault', plant.inject_fault(name, ch, mag, dur)))
-        m = plant.measure()
-        if est is not None:
-            r = est.update(m.position, m.motor_speed, m.pressure_a, m.pressure_b,
-                           m.active_channel)
-            x_hat, nis, est_ok = r.position, r.nis, (r.nis_dim > 0 and not r.sensor_fault)
-            innov = r.innovation
-        else:
-            x_hat, nis, est_ok, innov = m.position, float('nan'), False, float('nan')
-        ctl.request(scn.reference(t))
-        while commands and commands[0][0] <= t + 1e-9:
-            _, ch, why = commands.pop(0)
-            responses.append((k, 'command', mgr.request(ch, why)))
-        s = ChannelSample(t, u, tuple(m.motor_speed), tuple(m.motor_current), m.pressure_a,
-                          m.pressure_b, tuple(m.drive_enabled), tuple(m.drive_fault),
-                          m.valid, innov, est_ok)
-        mgr.update(s, k)
-        if mgr.select != applied:              # also after a request() earlier in this tick
-            applied = sel = mgr.select
-            plant.select(sel.channel, sel.drive_enable, sel.valve_open, sel.bypass_open)
-        status = (mgr.active, mgr.state)
-        if status != last_status and (status[0] != last_status[0] or mgr.state == 'SWITCHING'):
-            ctl.hold_integrator(hold_ticks)      # as the controller node does on /eha/redundancy
-        last_status = status
-        u = ctl.update(x_hat).speed_ref
-        f = scn.load if t >= scn.load_time - 1e-9 else 0.0
-        plant.step(u, f)
-        tr = plant.truth()
-        cols['t'][k] = plant.t
-        cols['ref'][k] = scn.reference(plant.t)
-        cols['x'][k] = tr.position
-        cols['x_meas'][k] = m.position
-        cols['w_ref'][k] = u
-        cols['w'][:, k] = tr.motor_speed
-        cols['w_meas'][:, k] = m.motor_speed
-        cols['i'][:, k] = tr.motor_current
-        cols['valve'][:, k] = tr.valve_fraction
-        cols['bypass'][k] = tr.bypass_fraction
-        cols['enable'][:, k] = plant.measure().drive_enabled
-        cols['active'][k] = mgr.active
-        cols['state'][k] = STATE_CODES[mgr.name]
-        cols['nis'][k] = nis
-        cols['innov'][k] = innov
-    cols.update(manager=mgr, responses=responses, estimator=est is not None)
+    refs = np.array([scn.reference(k * Ts) for k in range(n)])
+    loads = np.array([scn.load if k * Ts >= scn.load_time - 1e-9 else 0.0 for k in range(n)])
+    faults = schedule([(f[0], f[1:]) for f in sorted(scn.faults)], n, Ts)
+    commands = schedule([(c[0], c[1:]) for c in sorted(scn.commands)], n, Ts)
+    loop = BatchLoop(plant, est, ctl, mgr, hold_ticks, faults, commands)
+    rec = loop.run(refs, loads, fast=fast).T
+    cols = {'t': rec[R_T].copy(), 'x': rec[R_X].copy(), 'x_meas': rec[R_XM].copy(),
+            'w_ref': rec[R_U].copy(), 'bypass': rec[R_BYPASS].copy(),
+            'nis': rec[R_NIS].copy(), 'innov': rec[R_INNOV].copy(),
+            'w': rec[R_W:R_W + 2].copy(), 'w_meas': rec[R_WM:R_WM + 2].copy(),
+            'valve': rec[R_VALVE:R_VALVE + 2].copy(), 'i': rec[R_I:R_I + 2].copy(),
+            'enable': rec[R_EN:R_EN + 2] > 0.5, 'active': rec[R_ACTIVE].astype(int),
+            'state': rec[R_STATE].astype(int)}
+    cols['ref'] = np.array([scn.reference(t) for t in cols['t']])
+    cols.update(manager=mgr, responses=loop.responses, estimator=est is not None,
+                fast_ticks=loop.fast_ticks)
     return cols
+
+
+def schedule(items, n: int, Ts: float) -> dict:
+    """{tick: [payload, ...]} of time-sorted (t, payload) items: each at the first tick k < n
+    with t <= k Ts + 1e-9 (what a per-tick loop popping due items does)."""
+    out = {}
+    for t, payload in items:
+        k = max(0, math.ceil((t - 1e-9) / Ts))
+        while k > 0 and t <= (k - 1) * Ts + 1e-9:
+            k -= 1
+        while not t <= k * Ts + 1e-9:
+            k += 1
+        if k < n:
+            out.setdefault(k, []).append(payload)
+    return out
 
 
 def tracking_figures(t, x, ref, t_event: float, period: float, window: float = 0.5,

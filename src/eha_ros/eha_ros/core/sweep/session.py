@@ -99,6 +99,15 @@ class SweepSession:
         if 0 <= i < self.n:
             self.data[column][i] = value
 
+    def record_many(self, column: str, seq: int, values):
+        """:meth:`record` of consecutive ticks seq, seq + 1, ... (batch)."""
+        if self.seq0 is None:
+            return
+        i0, values = seq - self.seq0, np.asarray(values, float)
+        lo, hi = max(i0, 0), min(i0 + len(values), self.n)
+        if lo < hi:
+            self.data[column][lo:hi] = values[lo - i0:hi - i0]
+
     def check_error(self, seq: int, position: float) -> bool:
         """Abort when |reference - position| exceeds the limit for abort_ticks ticks in a row."""
         if self.aborted or self.seq0 is None:

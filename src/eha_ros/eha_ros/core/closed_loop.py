@@ -1,0 +1,171 @@
+"""Compiled closed-loop segment (DESIGN.md "three ways", 3): plant, estimator, position
+controller and switch-manager health checks for many ticks in one call, in the stack's order
+state(k) -> estimate(k) -> command(k) (+ channel select(k)) -> applied by the plant at k+1.
+
+Each tick runs the components' compiled steppers (plant.stepper, estimator.stepper,
+controller.stepper, redundancy.stepper): the same operations as the Python objects, so the
+results are bit-identical. A tick that anything event-like would touch -- a fault expiring,
+a measurement to reject, a valve step of a switch, a monitor verdict the state machine must
+act on, a non-finite value -- is not done here: the segment stops *before* it (components
+rolled back to the tick's start) and returns its index, for core.batch.BatchLoop to do that
+tick with the Python objects. So a segment never gives an answer the per-tick path would not.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .controller import stepper as CS
+from .estimator import stepper as ES
+from .jit_cache import drop_stale
+from .plant import layout as L
+from .plant import stepper as PS
+from .redundancy import stepper as RS
+
+drop_stale(__file__, 'plant', 'estimator', 'controller', 'redundancy')
+
+END, EVENT, NOISE = 0, 1, 2          # why a segment returned
+# record columns, one row per tick
+R_T = 0          # plant time after the step (s)
+R_X = 1          # true position after the step (m)
+R_X0 = 2         # true position at the tick start, when the state was measured (m)
+R_XM = 3         # measured position (m)
+R_XHAT = 4       # estimate (m)
+R_U = 5          # motor speed command (rad/s)
+R_NIS = 6
+R_INNOV = 7      # position innovation (m)
+R_FAULT = 8      # estimator sensor fault code
+R_NISDIM = 9
+R_W = 10         # true motor speeds after the step (2)
+R_WM = 12        # measured motor speeds (2)
+R_I = 14         # true motor currents after the step (2)
+R_VALVE = 16     # valve opening fractions after the step (2)
+R_BYPASS = 18
+R_EN = 19        # drive enables (2)
+R_CHANNEL = 21   # plant's active channel when measured
+R_ACTIVE = 22    # switch manager's active channel after its update
+R_STATE = 23     # switch manager's state code (ACTIVE_A 0, ACTIVE_B 1, SWITCHING 2,
+                 # DEGRADED 3, FAILED_SAFE 4)
+R_PM = 24        # measured pressures p_A, p_B (Pa)
+R_IM = 26        # measured motor currents (2)
+NREC = 28
+
+
+@njit(cache=True)
+def _copy(src, dst):
+    """dst <- src (same shape, 1 to 3 dimensions), no allocation."""
+    if src.ndim == 1:
+        for i in range(src.shape[0]):
+            dst[i] = src[i]
+    elif src.ndim == 2:
+        for i in range(src.shape[0]):
+            for j in range(src.shape[1]):
+                dst[i, j] = src[i, j]
+    else:
+        for i in range(src.shape[0]):
+            for j in range(src.shape[1]):
+                for m in range(src.shape[2]):
+                    dst[i, j, m] = src[i, j, m]
+
+
+@njit(cache=True)
+def state_code(g) -> int:
+    st = int(g[RS.G_STATE])
+    if st == RS.ST_ACTIVE:
+        return int(g[RS.G_ACTIVE])
+    return 2 if st == RS.ST_SWITCHING else (3 if st == RS.ST_DEGRADED else 4)
+
+
+@njit(cache=True)
+def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, has_mgr, u,
+            rec):
+    """Ticks k0 .. k1-1 with refs[k - off], loads[k - off] into rec[k - off]; u is the
+    previous command (rad/s).
+
+    Returns (k, why, u): k the first tick not done (k1 at END), why END / EVENT (tick k is
+    Python's) / NOISE (draw the next noise block, call again), u the last command.
+    """
+    S, P, U, T, block, meas, aux, ring, table = plant
+    ek, ee, x, Pe, F, G, ue, Q, tmp, H, R, y, Sy, H1, R1, y1, S1, g_leak, z2, z1, ws = est
+    ck, cc, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt = ctl
+    hk, mk, ms, hs, g = mgr
+    keep = (x.copy(), Pe.copy(), ee.copy(), cc.copy(), Fx.copy(), Rx.copy(), ms.copy(),
+            hs.copy(), g.copy())
+    w_meas = np.zeros(2)
+    i_meas = np.zeros(2)
+    reported = np.zeros(2, np.bool_)
+    fault = np.zeros(2, np.bool_)
+    steady = np.zeros(2, np.bool_)
+    cmd = np.zeros(2, np.bool_)
+    age = np.zeros(2)
+    for k in range(k0, k1):
+        if PS.noise_exhausted(aux):
+            return k, NOISE, u
+        ref = refs[k - off]
+        load = loads[k - off]
+        pos = meas[L.M_X]
+        ch = int(aux[PS.A_ACTIVE])
+        pa = meas[L.M_PA]
+        pb = meas[L.M_PB]
+        if (PS.fault_due(aux, table) or not math.isfinite(load) or not CS.ready(cc, ref)
+                or (has_est and not ES.ready(ek, ee, pos, meas[L.M_W0 + ch], pa, pb))):
+            return k, EVENT, u
+        _copy(x, keep[0]); _copy(Pe, keep[1]); _copy(ee, keep[2]); _copy(cc, keep[3])  # noqa
+        _copy(Fx, keep[4]); _copy(Rx, keep[5]); _copy(ms, keep[6]); _copy(hs, keep[7])  # noqa
+        _copy(g, keep[8])
+        for c in range(2):
+            w_meas[c] = meas[L.M_W0 + c]
+            i_meas[c] = meas[L.M_I0 + c]
+            reported[c] = U[L.U_EN0 + c] > 0.5
+            fault[c] = U[L.U_FAIL0 + c] > 0.5
+        x0 = S[L.S_X]
+        if has_est:
+            x_hat, innov, nis, nd, code = ES.estimate(
+                ek, ee, x, Pe, F, G, ue, Q, tmp, H, R, y, Sy, H1, R1, y1, S1, g_leak, z2, z1, ws,
+                pos, meas[L.M_W0 + ch], pa, pb)
+        else:
+            x_hat, innov, nis, nd, code = pos, math.nan, math.nan, 0, 0
+        CS.request(ck, cc, ref)
+        ok = math.isfinite(x_hat)
+        if ok and has_mgr:
+            ok = RS.supervise(hk, mk, ms, hs, g, k * Ts, k, u, w_meas, i_meas, pa, pb,
+                              reported, fault, innov, nd > 0 and code == 0, steady, age, cmd)
+        un = math.nan
+        if ok:
+            un = CS.control(ck, cc, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt, x_hat)
+        if not math.isfinite(un):
+            _copy(keep[0], x); _copy(keep[1], Pe); _copy(keep[2], ee); _copy(keep[3], cc)  # noqa
+            _copy(keep[4], Fx); _copy(keep[5], Rx); _copy(keep[6], ms); _copy(keep[7], hs)  # noqa
+            _copy(keep[8], g)
+            return k, EVENT, u
+        PS.step(S, P, U, T, nsub, block, meas, aux, ring, table, un, load)
+        u = un
+        r = rec[k - off]
+        r[R_T] = aux[PS.A_T]
+        r[R_X] = S[L.S_X]
+        r[R_X0] = x0
+        r[R_XM] = pos
+        r[R_XHAT] = x_hat
+        r[R_U] = un
+        r[R_NIS] = nis
+        r[R_INNOV] = innov
+        r[R_FAULT] = code
+        r[R_NISDIM] = nd
+        for c in range(2):
+            b = L.S_CH + c * L.NCH
+            r[R_W + c] = S[b + L.C_W]
+            r[R_WM + c] = w_meas[c]
+            r[R_I + c] = S[b + L.C_I]
+            r[R_VALVE + c] = S[b + L.C_FV]
+            r[R_EN + c] = U[L.U_EN0 + c] > 0.5
+        r[R_PM] = pa
+        r[R_PM + 1] = pb
+        r[R_IM] = i_meas[0]
+        r[R_IM + 1] = i_meas[1]
+        r[R_BYPASS] = S[L.S_FB]
+        r[R_CHANNEL] = ch
+        r[R_ACTIVE] = g[RS.G_ACTIVE] if has_mgr else ch
+        r[R_STATE] = state_code(g) if has_mgr else ch
+    return k1, END, u

@@ -1,0 +1,206 @@
+"""Estimator.update as one compiled call, for closed-loop kernels (core.closed_loop).
+
+Covers the common path only: started, measurement valid (else counters and reasons: Python),
+one tick since the previous state, not isolating, no Chinniah pair. Same operations in the
+same order as the Python path (predict eq. 4.1-4.2 with eq. 4.36, Joseph update eq. 4.4-4.6,
+fault detector), so the results are bit-identical. Scalars live in a state vector (E_*), the
+filter's own arrays are shared; :func:`pack` / :func:`unpack` move the scalars.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..jit_cache import drop_stale
+from . import fault_detector as fd
+from .kernels import predict, update_ws, workspace_size
+
+drop_stale(__file__)
+
+# constants
+K_XMAX, K_PMIN, K_PMAX, K_WMAX, K_ALPHA_PD = 0, 1, 2, 3, 4
+K_MODEL, K_USE_P, K_FRIC_P, K_ILEAK, K_NLIN = 5, 6, 7, 8, 9
+K_AP, K_DP, K_FS, K_VEPS, K_ISOLATE = 10, 11, 12, 13, 14
+K_JUMP, K_JUMP_N, K_STUCK_N, K_STUCK_TOL, K_DRIFT_K, K_DRIFT_H, K_DRIFT_N, K_HOLD = \
+    15, 16, 17, 18, 19, 20, 21, 22
+NK = 23
+# state
+E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
+E_NJUMP, E_NSAME, E_NDRIFT, E_GPOS, E_GNEG, E_ZPREV, E_HAS_ZPREV = 4, 5, 6, 7, 8, 9, 10
+E_HOLD = 11            # 3 entries: JUMP, STUCK, DRIFT
+E_DET = 14             # 3 entries
+E_CODE = 17
+NE = 18
+CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
+
+
+def supported(est) -> bool:
+    """The compiled path covers this estimator's configuration."""
+    return est.chinniah is None
+
+
+def pack(est):
+    """(constants, state, arrays) of an Estimator; arrays are the filter's own."""
+    kf, d = est.kf, est.detector
+    k = np.zeros(NK)
+    k[K_XMAX], k[K_PMIN], k[K_PMAX], k[K_WMAX] = est.x_max, est.p_min, est.p_max, est.w_max
+    k[K_ALPHA_PD] = est.alpha_pd
+    k[K_MODEL] = est.is_model
+    k[K_USE_P] = est.use_pressure
+    k[K_ISOLATE] = est.isolate
+    k[K_ILEAK] = -1.0
+    if est.is_model:
+        k[K_FRIC_P] = kf.friction_uses_pressure
+        k[K_ILEAK] = -1.0 if kf.i_leak is None else kf.i_leak
+        k[K_NLIN] = kf._n_lin
+        k[K_AP], k[K_DP], k[K_FS], k[K_VEPS] = kf.h.A_p, kf.h.D_p, kf.F_s, kf.v_eps
+    k[K_JUMP], k[K_JUMP_N] = d.jump_threshold, d.jump_debounce
+    k[K_STUCK_N], k[K_STUCK_TOL] = d.stuck_samples, d.stuck_tolerance
+    k[K_DRIFT_K], k[K_DRIFT_H], k[K_DRIFT_N] = d.drift_k, d.drift_h, d.drift_debounce
+    k[K_HOLD] = d.hold_ticks
+    e = np.zeros(NE)
+    e[E_OMEGA], e[E_PD_MEAS], e[E_PD_FILT] = est.omega_prev, est.pd_meas, est.pd_filt
+    e[E_UPDATES] = est.updates
+    e[E_NJUMP], e[E_NSAME], e[E_NDRIFT] = d.n_jump, d.n_same, d.n_drift
+    e[E_GPOS], e[E_GNEG] = d.g_pos, d.g_neg
+    e[E_HAS_ZPREV] = d.z_prev is not None
+    e[E_ZPREV] = d.z_prev if d.z_prev is not None else 0.0
+    for i, c in enumerate(CODES):
+        e[E_HOLD + i], e[E_DET + i] = d.hold[c], d.detections[c]
+    e[E_CODE] = d.code
+    if est.is_model:
+        u = kf.u
+        g_leak = kf._g_leak if kf.i_leak is not None else np.zeros(1)
+        H1, R1, y1, S1 = kf.H1, kf.R1, kf._y1, kf._S1
+    else:
+        u, g_leak = kf._u, np.zeros(1)
+        H1, R1, y1, S1 = kf.H, kf.R, kf.y, kf.S
+    ws = np.zeros(workspace_size(len(kf.x), 2))
+    arrays = (kf.x, kf.P, kf.F, kf.G, u, kf.Q, kf._tmp, kf.H, kf.R, kf.y, kf.S, H1, R1, y1, S1,
+              g_leak, np.zeros(2), np.zeros(1), ws)
+    return k, e, arrays
+
+
+def unpack(est, e) -> None:
+    d = est.detector
+    est.omega_prev, est.pd_meas, est.pd_filt = (float(e[i]) for i in
+                                                (E_OMEGA, E_PD_MEAS, E_PD_FILT))
+    est.updates = int(e[E_UPDATES])
+    d.n_jump, d.n_same, d.n_drift = int(e[E_NJUMP]), int(e[E_NSAME]), int(e[E_NDRIFT])
+    d.g_pos, d.g_neg = float(e[E_GPOS]), float(e[E_GNEG])
+    d.z_prev = float(e[E_ZPREV]) if e[E_HAS_ZPREV] else None
+    for i, c in enumerate(CODES):
+        d.hold[c], d.detections[c] = int(e[E_HOLD + i]), int(e[E_DET + i])
+    d.code = int(e[E_CODE])
+
+
+@njit(cache=True)
+def ready(k, e, position, w, pa, pb) -> bool:
+    """This measurement takes the common path (nothing to count, no reason to report)."""
+    if not (math.isfinite(w) and abs(w) <= k[K_WMAX]):
+        return False
+    if not (math.isfinite(position) and abs(position) <= k[K_XMAX]):
+        return False
+    if k[K_USE_P] > 0.5 and not pressure_ok(k, pa, pb):
+        return False
+    return not (k[K_ISOLATE] > 0.5 and e[E_CODE] != fd.NONE)
+
+
+@njit(cache=True)
+def pressure_ok(k, pa, pb) -> bool:
+    return (math.isfinite(pa) and k[K_PMIN] <= pa <= k[K_PMAX] and
+            math.isfinite(pb) and k[K_PMIN] <= pb <= k[K_PMAX])
+
+
+@njit(cache=True)
+def friction_estimate(omega, p_D, has_pd, A_p, D_p, F_s, v_eps):
+    """model_kf.friction_estimate (eq. 4.36 made continuous), same operations."""
+    s = D_p * omega / (A_p * v_eps)
+    s = 1.0 if s > 1.0 else (-1.0 if s < -1.0 else s)
+    if not has_pd:
+        return -s * F_s
+    force = A_p * p_D
+    held = F_s if force > F_s else (-F_s if force < -F_s else force)
+    a = abs(force)
+    return -s * (F_s if F_s < a else a) - (1.0 - abs(s)) * held
+
+
+@njit(cache=True)
+def pymax(a, b):
+    """Python's max(a, b)."""
+    return b if b > a else a
+
+
+@njit(cache=True)
+def detect(k, e, z, innovation, S) -> None:
+    """FaultDetector.update (jump, stuck, drift with hold), same operations."""
+    r = innovation / math.sqrt(S) if S > 0.0 else 0.0
+    e[E_NJUMP] = e[E_NJUMP] + 1 if abs(r) > k[K_JUMP] else 0
+    same = e[E_HAS_ZPREV] > 0.5 and abs(z - e[E_ZPREV]) <= k[K_STUCK_TOL]
+    e[E_NSAME] = e[E_NSAME] + 1 if same else 0
+    e[E_ZPREV] = z
+    e[E_HAS_ZPREV] = 1.0
+    e[E_GPOS] = pymax(0.0, e[E_GPOS] + r - k[K_DRIFT_K])
+    e[E_GNEG] = pymax(0.0, e[E_GNEG] - r - k[K_DRIFT_K])
+    e[E_NDRIFT] = e[E_NDRIFT] + 1 if pymax(e[E_GPOS], e[E_GNEG]) > k[K_DRIFT_H] else 0
+    now_jump = e[E_NJUMP] >= k[K_JUMP_N] and e[E_NSAME] < k[K_JUMP_N]
+    now_stuck = e[E_NSAME] + 1 >= k[K_STUCK_N]
+    now_drift = e[E_NDRIFT] >= k[K_DRIFT_N] and e[E_NSAME] < k[K_JUMP_N]
+    if now_jump:
+        e[E_GPOS] = 0.0
+        e[E_GNEG] = 0.0
+        e[E_NDRIFT] = 0
+        now_drift = False
+    code = fd.NONE
+    for i in range(3):
+        active = now_jump if i == 0 else (now_stuck if i == 1 else now_drift)
+        if active:
+            if e[E_HOLD + i] == 0:
+                e[E_DET + i] += 1
+            e[E_HOLD + i] = k[K_HOLD] + 1
+        elif e[E_HOLD + i] > 0:
+            e[E_HOLD + i] -= 1
+    for i in range(3):
+        if e[E_HOLD + i] > 0:
+            code = i + 1          # JUMP, STUCK, DRIFT = 1, 2, 3
+            break
+    e[E_CODE] = code
+
+
+@njit(cache=True)
+def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, z2, z1, ws,
+             position, w, pa, pb):
+    """Estimator.update on a ready() measurement: (position, innovation, nis, nis_dim, code)."""
+    pr_ok = pressure_ok(k, pa, pb)
+    if pr_ok:
+        e[E_PD_MEAS] = pa - pb
+    omega = 0.5 * (e[E_OMEGA] + w)
+    e[E_OMEGA] = w
+    use_p = k[K_USE_P] > 0.5
+    if k[K_MODEL] > 0.5:
+        u[0] = omega
+        has_pd = use_p and k[K_FRIC_P] > 0.5
+        u[1] = friction_estimate(omega, e[E_PD_FILT], has_pd, k[K_AP], k[K_DP], k[K_FS],
+                                 k[K_VEPS])
+        il = int(k[K_ILEAK])
+        if il >= 0:
+            pd = e[E_PD_FILT] if use_p else x[2]
+            for i in range(int(k[K_NLIN])):
+                F[i, il] = g_leak[i] * pd
+    predict(x, P, F, G, u, Q, tmp)
+    if pr_ok:
+        e[E_PD_FILT] += k[K_ALPHA_PD] * (e[E_PD_MEAS] - e[E_PD_FILT])
+    if pr_ok and use_p:
+        z2[0] = position
+        z2[1] = e[E_PD_MEAS]
+        nis = update_ws(x, P, H, R, z2, y, S, ws)
+        innov, s00, m = y[0], S[0, 0], 2
+    else:
+        z1[0] = position
+        nis = update_ws(x, P, H1, R1, z1, y1, S1, ws)
+        innov, s00, m = y1[0], S1[0, 0], 1
+    e[E_UPDATES] += 1
+    detect(k, e, position, innov, s00)
+    return x[0], innov, nis, m, int(e[E_CODE])

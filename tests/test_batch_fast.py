@@ -1,0 +1,116 @@
+"""The fast batch closed loop (core.batch.BatchLoop with core.closed_loop segments) reproduces
+the tick-by-tick reference path bit for bit: plant, estimator, controller and switch manager,
+over a load step, a commanded switch, faults (motor_fail, timed sensor faults, rejected
+pressures) and BatchStack's loop without the manager."""
+import math
+
+import numpy as np
+import pytest
+
+from eha_ros.core.batch import BatchStack
+from eha_ros.core.redundancy import batch as B
+
+T_SWITCH = 1.5
+T_FAIL = 2.5
+
+
+def same(a: dict, b: dict) -> list:
+    """Names of the arrays that differ (NaN equal to NaN)."""
+    return [k for k, v in a.items() if isinstance(v, np.ndarray)
+            and not np.array_equal(v, b[k], equal_nan=v.dtype.kind == 'f')]
+
+
+def events(r) -> list:
+    return [e.to_dict() for e in r['manager'].events]
+
+
+@pytest.fixture(scope='module')
+def table_3_4():
+    """Table 3.4-like: 3 Hz 3 mm sine, 10 kN load step at 1 s, commanded switch A -> B at
+    1.5 s, motor_fail on B at 2.5 s (automatic switch back to A), 3.2 s in all."""
+    scn = B.Scenario(duration=3.2, commands=[(T_SWITCH, 1, 'Table 3.4')],
+                     faults=[(T_FAIL, 'motor_fail', 1, 0.0, 0.0)])
+    return {mode: B.run(scn, switch_hold=0.02, fast=mode == 'fast') for mode in ('ref', 'fast')}
+
+
+def test_table_3_4_bit_identical(table_3_4):
+    ref, fast = table_3_4['ref'], table_3_4['fast']
+    assert same(ref, fast) == []
+    assert events(ref) == events(fast)
+    assert ref['responses'] == fast['responses']
+    # the scenario covers what it claims: load step, commanded switch, automatic switch
+    kinds = [e['kind'] for e in events(ref)]
+    assert kinds == ['switch_start', 'switch_done', 'switch_start', 'switch_done']
+    assert events(ref)[0]['commanded'] and not events(ref)[2]['commanded']
+    assert fast['manager'].name == 'DEGRADED' and fast['manager'].channel_healthy == [True, False]
+    n = len(ref['t'])
+    assert ref['fast_ticks'] == 0 and fast['fast_ticks'] > 0.98 * n      # really compiled
+    assert np.abs(ref['x'] - ref['ref']).max() < 2e-3                      # and tracking
+
+
+def test_timed_sensor_faults_and_rejections_bit_identical():
+    """Fault expiry (msp_noise, msp_drift, stuck pressures), rejected pressures (Python ticks
+    inside a run), a refused command and commands in a row."""
+    scn = B.Scenario(duration=2.4, faults=[(0.5, 'msp_noise', 0, 5e-5, 0.7),
+                                           (1.0, 'msp_drift', 0, 2e-3, 0.8),
+                                           (1.8, 'pressure_sensor', 0, math.nan, 0.1)],
+                     commands=[(1.2, 1, 'first'), (1.21, 0, 'refused'), (2.0, 0, 'back')])
+    ref, fast = (B.run(scn, switch_hold=0.02, fast=f) for f in (False, True))
+    assert same(ref, fast) == []
+    assert events(ref) == events(fast)
+    assert 'refused' in [e['kind'] for e in events(ref)]
+    assert ref['responses'] == fast['responses']
+    assert 0.9 * len(ref['t']) < fast['fast_ticks'] < len(ref['t'])
+
+
+def test_without_estimator_bit_identical():
+    scn = B.Scenario(duration=1.5, commands=[(1.0, 1, 'no estimator')])
+    ref, fast = (B.run(scn, use_estimator=False, fast=f) for f in (False, True))
+    assert not ref['estimator'] and same(ref, fast) == [] and events(ref) == events(fast)
+
+
+def test_batch_stack_run_equals_ticks():
+    n = 1500
+    t = np.arange(n) * 1e-3
+    refs = 2e-3 * np.sin(2 * np.pi * 5.0 * t)
+    loads = np.where(t >= 0.8, 5e3, 0.0)
+    a, b = BatchStack(seed=3), BatchStack(seed=3)
+    ticks = [a.tick(r, f) for r, f in zip(refs, loads)]
+    fast = b.run(refs[:700], loads[:700])
+    rest = b.run(refs[700:], loads[700:])
+    for name in ('seq', 'reference', 'measured', 'estimate', 'truth', 'command',
+                 'motor_speed_0', 'motor_speed_1', 'active_channel'):
+        col = np.concatenate((fast[name], rest[name]))
+        assert np.array_equal(col, [getattr(tk, name) for tk in ticks]), name
+    assert b.k == a.k == n
+    assert b._loop.fast_ticks >= n - 2
+
+
+@pytest.mark.parametrize('over', [{'estimator.filter': 'pva'},
+                                  {'estimator.measurements': 'position'},
+                                  {'estimator.model.friction_pressure': True,
+                                   'estimator.fault.isolate': True}])
+def test_estimator_variants_bit_identical(over):
+    """PVA filter, position-only model KF, and a fault-isolating estimator (predict-only
+    ticks after the load step's innovation jump: Python ticks) through BatchStack."""
+    n = 1500
+    t = np.arange(n) * 1e-3
+    refs, loads = 2e-3 * np.sin(2 * np.pi * 3.0 * t), np.where(t > 0.8, 8e3, 0.0)
+    ov = {'estimator': {f'estimator:{k}': v for k, v in over.items()}}
+    a, b = BatchStack(seed=2, overrides=ov), BatchStack(seed=2, overrides=ov)
+    ticks = [a.tick(r, f) for r, f in zip(refs, loads)]
+    fast = b.run(refs, loads)
+    for name in ('estimate', 'command', 'truth', 'measured'):
+        assert np.array_equal(fast[name], [getattr(tk, name) for tk in ticks]), name
+    assert b._loop.fast_ticks > 700
+
+
+def test_non_finite_input_is_the_python_error():
+    """A segment never answers where the per-tick path would not: a NaN load raises the
+    plant's ValueError at that tick, with everything before it done."""
+    stack = BatchStack()
+    loads = np.zeros(400)
+    loads[300] = math.nan
+    with pytest.raises(ValueError, match='non-finite plant input'):
+        stack.run(np.zeros(400), loads)
+    assert stack.plant.t == pytest.approx(0.3)
