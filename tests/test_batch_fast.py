@@ -114,3 +114,18 @@ def test_non_finite_input_is_the_python_error():
     with pytest.raises(ValueError, match='non-finite plant input'):
         stack.run(np.zeros(400), loads)
     assert stack.plant.t == pytest.approx(0.3)
+
+
+def test_batch_stack_run_equals_ticks_through_an_acceleration_limited_step():
+    """A jumped reference takes the shaper's acceleration-limited move (control.accel_limit)."""
+    n = 1200
+    refs = np.where(np.arange(n) >= 200, 5e-3, 0.0)
+    loads = np.zeros(n)
+    a, b = BatchStack(seed=4), BatchStack(seed=4)
+    ticks = [a.tick(r, f) for r, f in zip(refs, loads)]
+    fast = b.run(refs, loads)
+    for name in ('reference', 'estimate', 'truth', 'command'):
+        assert np.array_equal(fast[name], [getattr(tk, name) for tk in ticks]), name
+    assert a.controller.ref.rate == b.controller.ref.rate == 0.0
+    assert b._loop.fast_ticks >= n - 2
+    assert max(fast['truth']) < 5e-3 * 1.05              # the issue 6 overshoot bound

@@ -1,5 +1,5 @@
 """PositionController.request + update as compiled calls, for closed-loop kernels
-(core.closed_loop): reference shaper (clamp, rate limit), prefilter F, Tustin integrator with
+(core.closed_loop): reference shaper (clamp, rate and acceleration limit), prefilter F, Tustin integrator with
 hold and conditional anti-windup, lead/lag R, speed clamp (eq. 4.74-4.77), the same operations
 as the Python path. Scalars live in a state vector (C_*); F and R states are the objects' own.
 """
@@ -16,11 +16,11 @@ from .discrete import ss_step
 drop_stale(__file__)
 
 # constants
-K_LIMIT, K_STEP, K_KDC, K_T, K_AW, K_WMAX, K_FDD, K_RDD = range(8)
-NK = 8
+K_LIMIT, K_STEP, K_KDC, K_T, K_AW, K_WMAX, K_FDD, K_RDD, K_VMAX, K_ACCEL, K_TS = range(11)
+NK = 11
 # state
-C_TARGET, C_VALUE, C_STARTED, C_V, C_CLAMPED, C_HOLD, C_N_SAT, C_N_CLAMPREF = range(8)
-NC = 8
+C_TARGET, C_VALUE, C_STARTED, C_V, C_CLAMPED, C_HOLD, C_N_SAT, C_N_CLAMPREF, C_RATE = range(9)
+NC = 9
 
 
 def pack(ctl):
@@ -29,11 +29,13 @@ def pack(ctl):
     k = np.zeros(NK)
     k[K_LIMIT], k[K_STEP], k[K_KDC], k[K_T] = ref.limit, ref.step, ctl.k_dc, ctl.T
     k[K_AW], k[K_WMAX], k[K_FDD], k[K_RDD] = ctl.antiwindup, ctl.omega_max, ctl.F._dd, ctl.R._dd
+    k[K_VMAX], k[K_ACCEL], k[K_TS] = ref.vmax, ref.accel, ref.Ts
     c = np.zeros(NC)
     c[C_TARGET] = ref.target if ref.target is not None else math.nan
     c[C_STARTED] = ref.value is not None
     c[C_VALUE] = ref.value if ref.value is not None else 0.0
     c[C_V], c[C_CLAMPED], c[C_HOLD] = ctl.v, ctl.clamped, ctl.hold
+    c[C_RATE] = ref.rate
     F, R = ctl.F, ctl.R
     arrays = (F._ad, F._bd, F._cd, F.x, F._tmp, R._ad, R._bd, R._cd, R.x, R._tmp)
     return k, c, arrays
@@ -44,6 +46,7 @@ def unpack(ctl, c) -> None:
     ctl.ref.target = float(c[C_TARGET]) if math.isfinite(c[C_TARGET]) else None
     ctl.ref.value = float(c[C_VALUE]) if c[C_STARTED] else None
     ctl.v, ctl.clamped, ctl.hold = float(c[C_V]), int(c[C_CLAMPED]), int(c[C_HOLD])
+    ctl.ref.rate = float(c[C_RATE])
     for name, i in (('saturated_ticks', C_N_SAT), ('clamped_references', C_N_CLAMPREF)):
         if c[i]:
             ctl.c.bump(name, int(c[i]))
@@ -66,12 +69,29 @@ def request(k, c, position) -> None:
 
 
 @njit(cache=True)
-def control(k, c, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt, x_hat):
-    """PositionController.update(x_hat).speed_ref of a started controller."""
+def shape(k, c) -> None:
+    """ReferenceShaper.next: rate limit, or the acceleration-limited move to a jumped target."""
     delta = c[C_TARGET] - c[C_VALUE]
     step = k[K_STEP]
-    d = delta if delta < step else step                 # min(step, delta)
-    c[C_VALUE] += d if d > -step else -step             # max(-step, .)
+    if k[K_ACCEL] == 0.0 or (c[C_RATE] == 0.0 and abs(delta) <= step):
+        c[C_VALUE] = c[C_TARGET] if abs(delta) <= step else \
+            c[C_VALUE] + math.copysign(step, delta)
+        return
+    a, Ts = k[K_ACCEL], k[K_TS]
+    brake = a * (math.sqrt(0.25 * Ts * Ts + 2.0 * abs(delta) / a) - 0.5 * Ts)
+    want = math.copysign(min(k[K_VMAX], brake), delta)
+    c[C_RATE] += max(-a * Ts, min(a * Ts, want - c[C_RATE]))
+    if abs(delta) <= abs(c[C_RATE]) * Ts or abs(delta) <= a * Ts * Ts:
+        c[C_VALUE] = c[C_TARGET]
+        c[C_RATE] = 0.0
+    else:
+        c[C_VALUE] += c[C_RATE] * Ts
+
+
+@njit(cache=True)
+def control(k, c, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt, x_hat):
+    """PositionController.update(x_hat).speed_ref of a started controller."""
+    shape(k, c)
     r = ss_step(Fa, Fb, Fc, k[K_FDD], Fx, c[C_VALUE], Ft)
     e = r - x_hat
     w = k[K_KDC] * e
