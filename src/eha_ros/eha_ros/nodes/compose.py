@@ -38,7 +38,9 @@ class Bus:
         self.final = False
 
     def guard(self, callback):
-        """Run callback under the process lock."""
+        """Run callback under the process lock (not a diag.reader: it only reads)."""
+        if getattr(callback, 'eha_reader', False):
+            return callback
         lock = self.lock
 
         @functools.wraps(callback)   # rclpy inspects the signature (timer info, message info)
@@ -82,7 +84,8 @@ class LocalPublisher:
             self.dds.publish(msg)
 
     def get_subscription_count(self) -> int:
-        return self.dds.get_subscription_count() + len(self.bus.subscribers.get(self.topic, ()))
+        """Co-located subscribers + outside ones (the latter looked up every 0.2 s)."""
+        return self.remote_subscribers() + len(self.bus.subscribers.get(self.topic, ()))
 
     def __getattr__(self, name):
         return getattr(self.dds, name)

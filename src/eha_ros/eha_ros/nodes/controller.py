@@ -184,6 +184,7 @@ def make_node(params: dict):
                         f'motor speed')
                 self.send(0, 0.0, False)      # seq 0: answers no estimate (contract)
 
+        @diag.reader
         def publish_diagnostics(self):
             values = self.loop.values()
             values.update(watchdog_tripped=self.tripped, drive_gain_mismatch=self.mismatch)

@@ -2,6 +2,13 @@
 from __future__ import annotations
 
 
+def reader(method):
+    """Mark a timer callback that only reads node state (diagnostics): a composed process
+    (eha_loop) runs it without the process-wide callback lock, so it never holds up the loop."""
+    method.eha_reader = True
+    return method
+
+
 def publisher(node):
     from diagnostic_msgs.msg import DiagnosticArray
     return node.create_publisher(DiagnosticArray, '/diagnostics', 10)

@@ -18,9 +18,12 @@ from ..core.cli import UsageError, guarded
 from ..core.params import load, parse_ros_args
 from . import common
 
+COMPOSED_STALE_CHECK = 0.005   # s: estimator.node.timer_period in eha_loop unless given
 LOOP_NODES = ('estimator', 'controller', 'switch_manager')
 PLANTS = {'sim': 'plant_sim', 'bridge': 'hardware_bridge'}
-GIL_SWITCH_INTERVAL = 2e-4   # s: the loop thread gets the GIL back quickly from other threads
+# s: Python's default. Shorter (0.2 ms tried) lets a 1 kHz executor timer preempt the loop
+# thread mid-tick, only to block on the callback lock: two thread switches per timer tick.
+GIL_SWITCH_INTERVAL = 5e-3
 
 
 def parse(argv):
@@ -53,6 +56,13 @@ def main(argv=None) -> int:
             raise UsageError('-r __node:= would give every co-located node the same name; '
                              'rename single nodes with -r <node>:__node:=<name>')
         modules = {n: importlib.import_module(f'{__package__}.{n}') for n in names}
+        if 'estimator' in names and not any(k.endswith('estimator.node.timer_period')
+                                            for k in overrides):
+            # states arrive in the loop thread itself: the stale check only matters when that
+            # thread stalls, and a 1 kHz executor timer costs the loop a GIL hand-over per tick
+            overrides = dict(overrides, **{'estimator:estimator.node.timer_period':
+                                           COMPOSED_STALE_CHECK})
+            ros = ros + ['-p', f'estimator:estimator.node.timer_period:={COMPOSED_STALE_CHECK}']
         params = {n: load(modules[n].SCHEMA, files, overrides, node=n, namespace=namespace)
                   for n in names}
         if params[names[0]].get('sim_node.lockstep'):

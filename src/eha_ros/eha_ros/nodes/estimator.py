@@ -120,6 +120,7 @@ def make_node(params: dict):
             m.sensor_fault = int(r.sensor_fault)
             self.pub.publish(m)
 
+        @diag.reader
         def publish_diagnostics(self):
             values = self.loop.values()
             values.update({'stale': self.stale,

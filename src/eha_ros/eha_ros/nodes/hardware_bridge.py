@@ -366,6 +366,7 @@ def make_node(params: dict):
             self.pub_state.publish(s)
 
         # ---- diagnostics (executor thread) ----
+        @diag.reader
         def publish_diagnostics(self):
             names = state_publishers(self, self.state_topic)
             others = names if len(names) > 1 else []                 # ours is one of them

@@ -265,6 +265,7 @@ def make_node(params: dict):
                 self.publish(self.now_stamp())
                 self.last_publish = time.monotonic()
 
+        @diag.reader
         def publish_diagnostics(self):
             per, ex = self.period.summary(), self.exec_time.summary()
             values = {'ticks': self.k, 'sim_time_s': self.k * self.Ts,

@@ -15,6 +15,7 @@ import sys
 import threading
 import time
 from collections import deque
+from itertools import islice
 
 from ..core.redundancy import ChannelSample, EventLog, SwitchManager
 from ..core.redundancy.params import SCHEMA, check
@@ -51,6 +52,7 @@ def make_node(params: dict):
             self.speed_ref = 0.0
             self.cmd_seq = None
             self.refs = deque(maxlen=256)    # (seq, speed ref) of recent commands
+            self.scan = min(256, 2 * self.max_cmd_age_ticks + 8)
             self.innovation, self.estimate_ok = float('nan'), False
             self.last_state_time = None
             self.state_stale = False
@@ -127,7 +129,9 @@ def make_node(params: dict):
                                        f'{self.p["switch.node.arm_time"]:g} s: monitors armed')
             # which command the drive applies now is not known here (DDS latency): the speed
             # error is measured from the range of the references of the last window
-            recent = [r for k, r in self.refs if k >= msg.seq - self.max_cmd_age_ticks]
+            # (commands come once per tick: the window is within the newest entries)
+            oldest = msg.seq - self.max_cmd_age_ticks
+            recent = [r for k, r in islice(reversed(self.refs), self.scan) if k >= oldest]
             band = (min(recent), max(recent)) if recent else None
             s = ChannelSample(msg.seq * self.Ts, self.speed_ref, tuple(msg.motor_speed),
                               tuple(msg.motor_current), msg.pressure_a, msg.pressure_b,
@@ -209,6 +213,7 @@ def make_node(params: dict):
                 self.get_logger().warning('no /eha/state: health is not being monitored')
             self.state_stale = stale
 
+        @diag.reader
         def publish_diagnostics(self):
             with self.lock:
                 mgr = self.mgr
