@@ -8,6 +8,7 @@ ROS parameters and validated again from what rclpy holds (``-p`` overrides inclu
 from __future__ import annotations
 
 import contextlib
+import gc
 import signal
 import sys
 import threading
@@ -97,6 +98,10 @@ def spin(argv, make_nodes: Callable) -> int:
         executor = make_executor()
         for node in nodes:
             executor.add_node(node)
+        # start-up made ~10^6 long-lived objects (numba, scipy, rclpy): keep them out of the
+        # collector, so a full collection does not stall a 1 kHz loop for tens of ms
+        gc.collect()
+        gc.freeze()
         while not stop.is_set() and rclpy.ok() and \
                 not any(getattr(n, 'done', False) for n in nodes):
             executor.spin_once(timeout_sec=0.1)     # a node may end itself (node.done)
