@@ -111,9 +111,10 @@ def test_5mm_step_same_as_plant_sim(results):
         print(f'step response at {f:.0f} Hz: plant_sim {g0:6.2f} dB {p0:7.1f} deg | bridge+ADS '
               f'{g1:6.2f} dB {p1:7.1f} deg | diff {g1 - g0:+.3f} dB {p1 - p0:+.2f} deg')
         assert abs(g1 - g0) <= 0.5 and abs(p1 - p0) <= 5.0
-    # plant_sim alone scatters by 1.6 points of overshoot between runs (noise, friction)
+    # plant_sim alone scatters by 1.6 points of overshoot between runs (noise, friction);
+    # with the controller's acceleration-limited step both stay within issue 6's 5 %
     assert abs(sim['overshoot_pct'] - ads['overshoot_pct']) < 3.0
-    assert 5.0 < ads['overshoot_pct'] < 20.0
+    assert ads['overshoot_pct'] < 5.0 and sim['overshoot_pct'] < 5.0
 
 
 def test_stepped_sweep_same_as_plant_sim(results):

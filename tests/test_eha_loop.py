@@ -69,7 +69,8 @@ def test_every_state_is_answered_in_its_tick(listener):
     assert wait_for(lambda: listener.diags['plant_sim: loop']['ticks'] > d0['ticks'] + 3000, 10)
     d1 = listener.diags['plant_sim: loop']
     ticks = d1['ticks'] - d0['ticks']
-    lost = d1['commands_not_for_previous_tick'] - d0['commands_not_for_previous_tick']
+    lost = d1.get('commands_not_for_previous_tick', 0) - \
+        d0.get('commands_not_for_previous_tick', 0)      # a counter appears once bumped
     assert lost <= 0.01 * ticks, f'{lost} of {ticks} ticks lost'
     common = set(listener.state) & set(listener.estimate) & set(listener.command)
     assert len([k for k in common if k > k0]) > 1000

@@ -70,7 +70,7 @@ def test_plant_swapped_for_the_bridge_and_the_ads_test_peer(tmp_path):
     assert set(summary['exit_codes']) == {'ads_peer', 'eha_loop'}
     assert '--plant bridge' in summary['processes']['eha_loop']
     link = summary['diagnostics']['hardware_bridge: link']
-    assert link['armed'] is True and link['link_up'] is True and link['ticks'] > 500
+    assert link['armed'] is True and link['link_up'] is True and link['ticks'] > 100, link
     assert 'plant_sim: loop' not in summary['diagnostics']
     for node in ('estimator', 'controller', 'switch_manager'):
         assert any(k.startswith(node) for k in summary['diagnostics']), node

@@ -39,7 +39,8 @@ class EventsSpinner(Spinner):
         super().__init__(node, make_executor())
 
 
-REF_LEAD = 3          # ticks: references are sent this far ahead with their seq (as the sweep)
+REF_LEAD = 20         # ticks: references are sent this far ahead with their seq, so a catch-up
+                      # burst of the plant's loop after a stall still finds them
 
 
 def ref_at(t):
