@@ -12,6 +12,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/launch', ['launch/eha_stack.launch.py']),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

@@ -149,3 +149,12 @@ def node_kwargs() -> dict:
     """Keyword arguments for rclpy Node so params-file keys show up as overrides."""
     return dict(automatically_declare_parameters_from_overrides=False,
                 allow_undeclared_parameters=False)
+
+
+def channel_ok(node, msg, counters) -> bool:
+    """A /eha/channel_select for channel 0 or 1; anything else is counted, warned, ignored."""
+    if msg.channel <= 1:
+        return True
+    counters.bump('rejected_selects')
+    node.get_logger().warning(f'channel_select: channel {msg.channel} is not 0 or 1; ignored')
+    return False

@@ -24,7 +24,7 @@ from ..core.cli import UsageError
 from ..core.params import default_config_dir
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
+from .common import channel_ok, declare_and_validate, latched_qos, node_base, run, stream_qos
 
 
 def state_publishers(node, topic: str) -> list[str]:
@@ -134,10 +134,7 @@ def make_node(params: dict):
                     self.go.set()
 
         def on_select(self, msg):
-            if msg.channel > 1:
-                self.c.bump('rejected_selects')
-                self.get_logger().warning(f'channel_select: channel {msg.channel} is not 0 or 1; '
-                                          f'ignored')
+            if not channel_ok(self, msg, self.c):
                 return
             with self.lock:
                 self.select = (int(msg.channel), bool(msg.drive_enable[0]),

@@ -16,7 +16,7 @@ from ..core.plant import EhaPlant
 from ..core.plant_sim_params import SCHEMA
 from ..core.stats import Counters, Histogram, RingStats
 from . import diag
-from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
+from .common import channel_ok, declare_and_validate, latched_qos, node_base, run, stream_qos
 
 
 class CommandGate:
@@ -122,10 +122,7 @@ def make_node(params: dict):
             self.gate.load_force(msg.force)
 
         def on_select(self, msg):
-            if msg.channel > 1:
-                self.c.bump('rejected_selects')
-                self.get_logger().warning(f'channel_select: channel {msg.channel} is not 0 or 1; '
-                                          f'ignored')
+            if not channel_ok(self, msg, self.c):
                 return
             with self.lock:
                 self.plant.select(int(msg.channel), tuple(bool(b) for b in msg.drive_enable),

@@ -91,6 +91,34 @@ def plan(args) -> dict:
     return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant}
 
 
+def build_stack(args, p: dict, out: str | None = None):
+    """The Stack run_stack starts (and the launch file mirrors) for parsed options."""
+    from ..stack import Stack
+    extra = {k: list(v) for k, v in p['extra'].items()}
+    if args.sweep and out:
+        extra.setdefault('sweep', []).extend(
+            ['-p', f'sweep:sweep.out_dir:={out}', '-p', 'sweep:sweep.run_name:=sweep'])
+    return Stack(p['nodes'], args.config, extra=extra,
+                 log_dir=os.path.join(out, 'logs') if out else None,
+                 lockstep=args.mode == 'lockstep', composed=p['structure'] == 'composed',
+                 record=os.path.join(out, 'recording.mcap') if args.record and out else None,
+                 ads_peer=p['peer'])
+
+
+def launch_entries(argv) -> list[tuple[str, str, list[str]]]:
+    """For launch/eha_stack.launch.py: (kind, executable, arguments) of every process
+    run_stack would start with these options; kind 'node' (package eha_ros) or 'python'
+    (a module run with the interpreter, e.g. the ADS test peer)."""
+    args = parse(argv)
+    entries = []
+    for name, cmd in build_stack(args, plan(args)).commands().items():
+        if cmd[1:2] == ['-m']:
+            entries.append(('python', cmd[2], cmd[3:]))
+        else:
+            entries.append(('node', os.path.basename(cmd[0]), cmd[1:]))
+    return entries
+
+
 def wait_for_loop(stack, monitor, plant: str, timeout: float) -> str:
     """Until the plant's diagnostics count ticks: 'duration' (running) or why not."""
     end = time.monotonic() + timeout
@@ -125,18 +153,10 @@ def main(argv=None) -> int:
 
 def run(args) -> int:
     from ..monitor import CpuMeter, DiagMonitor
-    from ..stack import Stack
     p = plan(args)
     out = run_dir(args.out, args.name)
     logs = os.path.join(out, 'logs')
-    extra = p['extra']
-    if args.sweep:
-        extra.setdefault('sweep', []).extend(
-            ['-p', f'sweep:sweep.out_dir:={out}', '-p', 'sweep:sweep.run_name:=sweep'])
-    stack = Stack(p['nodes'], args.config, extra=extra, log_dir=logs,
-                  lockstep=args.mode == 'lockstep', composed=p['structure'] == 'composed',
-                  record=os.path.join(out, 'recording.mcap') if args.record else None,
-                  ads_peer=p['peer'])
+    stack = build_stack(args, p, out)
     monitor = DiagMonitor()
     stack.start()
     print(f'run_stack: {args.mode}, {p["structure"]}: started '
