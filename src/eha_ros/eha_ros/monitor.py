@@ -33,6 +33,7 @@ class DiagMonitor:
         self.node = rclpy.create_node(name)
         self.latest: dict[str, dict] = {}
         self.levels: dict[str, int] = {}
+        self.arrival: dict[str, float] = {}          # monotonic time of the latest per name
         self.lock = threading.Lock()
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 100)
         self.executor = SingleThreadedExecutor()
@@ -46,6 +47,7 @@ class DiagMonitor:
             for s in msg.status:
                 self.latest[s.name] = {v.key: parse_value(v.value) for v in s.values}
                 self.levels[s.name] = s.level[0] if isinstance(s.level, bytes) else int(s.level)
+                self.arrival[s.name] = time.monotonic()
 
     def _spin(self):
         while not self._stop.is_set():
@@ -62,6 +64,17 @@ class DiagMonitor:
             if name.startswith(prefix):
                 return snap[name]
         return {}
+
+    def next_after(self, prefix: str, t: float, timeout: float = 5.0) -> tuple[dict, float]:
+        """The first values of ``prefix`` that arrived after monotonic time t, and when."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            with self.lock:
+                names = sorted(n for n in self.latest if n.startswith(prefix))
+                if names and self.arrival[names[0]] > t:
+                    return dict(self.latest[names[0]]), self.arrival[names[0]]
+            time.sleep(0.01)
+        raise TimeoutError(f'no /diagnostics from {prefix!r} within {timeout:g} s')
 
     def wait_for(self, prefix: str, timeout: float) -> bool:
         end = time.monotonic() + timeout

@@ -31,15 +31,13 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
                 raise RuntimeError(f'the loop did not start within 90 s (exited: {stack.dead()})')
             time.sleep(0.1)
         time.sleep(warmup)
-        d0 = monitor.find('plant_sim: loop')
+        d0, t0 = monitor.next_after('plant_sim: loop', time.monotonic())
         cpu = CpuMeter(stack.procs)
         cpu.start()
-        t0 = time.monotonic()
         time.sleep(duration)
-        wall = time.monotonic() - t0
         share = cpu.read()
-        time.sleep(1.2)                                  # one more diagnostics period
-        d1 = monitor.find('plant_sim: loop')
+        d1, t1 = monitor.next_after('plant_sim: loop', t0 + duration - 0.5)
+        wall = t1 - t0                   # between the two diagnostics the figures come from
         snap = monitor.snapshot()
     finally:
         stack.stop()
