@@ -1,8 +1,8 @@
-"""scripts/run_stack: start the EHA stack (parameters from config/), watch it, stop it cleanly.
+"""Start the EHA stack (parameters from config/), watch it, stop it cleanly.
 
 Real time (default): the 1 kHz loop nodes (plant_sim or hardware_bridge, estimator,
 controller, switch_manager) run composed in one eha_loop process (in-process topics; see
-README "Real time at 1 kHz" for the measurements behind this), every other node in its own
+README "Running the whole stack" for the measurements behind this), every other node in its own
 process. --structure processes runs each loop node as its own process as well. Lock-step:
 every node its own process, the plant steps when command(k) has arrived.
 One folder per run: out/stack/<run>/ with logs/<process>.log and stack.json (commands, exit
@@ -24,7 +24,8 @@ PLANT_NODE = {'sim': 'plant_sim', 'bridge': 'hardware_bridge'}
 
 
 def parse(argv):
-    ap = argparse.ArgumentParser(prog='scripts/run_stack', description=__doc__.split('\n\n')[0],
+    ap = argparse.ArgumentParser(prog='scripts/run_stack', description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog='Node parameters: -p node:key:=value (repeatable), '
                                         'e.g. -p plant_sim:sim_node.seed:=3')
     ap.add_argument('--mode', choices=('realtime', 'lockstep'), default='realtime',
