@@ -35,6 +35,8 @@ def bridge_cmd(port, *extra):
         '-p', f'hardware_bridge:bridge.watchdog_time:={WATCHDOG}',
         '-p', 'hardware_bridge:bridge.diagnostics_period:=0.2',
         '-p', 'hardware_bridge:bridge.stale_limit:=0.05',     # the PLC task shares this process
+        # and a busy test process can miss 3 x 100 ms (seen once in CI after the reset)
+        '-p', 'hardware_bridge:ads.link_loss_cycles:=8',
         '-p', 'hardware_bridge:bridge.startup_discovery:=0.5', *extra])
 
 
