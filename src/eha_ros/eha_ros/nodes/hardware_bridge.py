@@ -237,7 +237,13 @@ def make_node(params: dict):
                 if last is not None:
                     self.period.add(t - last)
                 last = t
-                self.cycle(dt)
+                try:
+                    self.cycle(dt)
+                except SymbolError:
+                    raise
+                except Exception as err:      # never die silently in the I/O thread
+                    self.c.bump('cycle_errors')
+                    self.get_logger().error(f'cycle failed: {err!r}', throttle_duration_sec=1.0)
 
         def lockstep_loop(self):
             """Cycle on command(k); re-publish state(k) when it does not come."""
@@ -360,7 +366,12 @@ def make_node(params: dict):
                 valve[i] = bool(v[f'valve_open_{i}'])
                 enabled[i] = bool(v[f'drive_enabled_{i}'])
                 fault[i] = bool(v[f'drive_fault_{i}'])
-            self.pub_state.publish(s)
+            try:
+                self.pub_state.publish(s)
+            except Exception as err:        # e.g. RCLError under DDS overload: count, go on
+                self.c.bump('publish_errors')
+                self.get_logger().error(f'publishing state {self.k} failed: {err}',
+                                        throttle_duration_sec=1.0)
 
         # ---- diagnostics (executor thread) ----
         @diag.reader

@@ -198,7 +198,12 @@ def make_node(params: dict):
                 enabled[i] = bool(m.drive_enabled[i])
                 fault[i] = bool(m.drive_fault[i])
             self.state_time = time.perf_counter()
-            self.pub_state.publish(s)
+            try:
+                self.pub_state.publish(s)
+            except Exception as err:        # e.g. RCLError under DDS overload: count, go on
+                self.c.bump('publish_errors')
+                self.get_logger().error(f'publishing state {self.k} failed: {err}',
+                                        throttle_duration_sec=1.0)
             if not self.pub_truth.get_subscription_count():
                 return                            # nobody listens: skip building the truth
             t = self.truth_msg
