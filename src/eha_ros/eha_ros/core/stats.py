@@ -1,6 +1,8 @@
 """Loop statistics for 1 kHz nodes: period and execution-time percentiles, overruns, counters."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 
@@ -86,6 +88,13 @@ class LoopStats:
         self.exec.add(seconds)
         if seconds > self.Ts:
             self.overruns += 1
+
+    def timed(self, handler, msg):
+        """Run handler(msg) as one loop input: arrival (perf_counter) and execution time."""
+        t0 = time.perf_counter()
+        self.arrived(t0)
+        handler(msg)
+        self.executed(time.perf_counter() - t0)
 
     def values(self) -> dict:
         per, ex = self.period.summary(), self.exec.summary()

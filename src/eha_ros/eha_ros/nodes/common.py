@@ -158,3 +158,13 @@ def channel_ok(node, msg, counters) -> bool:
     counters.bump('rejected_selects')
     node.get_logger().warning(f'channel_select: channel {msg.channel} is not 0 or 1; ignored')
     return False
+
+
+def publish_counted(node, pub, msg, what: str) -> None:
+    """Publish from a loop thread; a failure (e.g. RCLError under DDS overload) is counted as
+    publish_errors and logged, so the loop goes on."""
+    try:
+        pub.publish(msg)
+    except Exception as err:
+        node.c.bump('publish_errors')
+        node.get_logger().error(f'publishing {what} failed: {err}', throttle_duration_sec=1.0)

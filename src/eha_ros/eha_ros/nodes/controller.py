@@ -42,7 +42,6 @@ def make_node(params: dict):
             self.p = p = declare_and_validate(self, SCHEMA, params)
             self.Ts = p['plant.sim.Ts']
             self.c = Counters()
-            prewarp = 2 * np.pi * p['control.prewarp_hz'] or None
             self.ctl = PositionController.from_params(p, counters=self.c)
             self.mismatch = drive_mismatch(p)
             if self.mismatch > p['control.drive_check_tolerance']:
@@ -80,7 +79,7 @@ def make_node(params: dict):
                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
             self.get_logger().info(
                 f'controller: QFT G (order {len(p["position_controller.den"]) - 1}) and F at '
-                f'{1 / self.Ts:.0f} Hz, Tustin{" prewarped" if prewarp else ""}, '
+                f'{1 / self.Ts:.0f} Hz, Tustin{" prewarped" if p["control.prewarp_hz"] else ""}, '
                 f'speed clamp {p["plant.drive.omega_max"]:.0f} rad/s')
 
         def on_reference(self, msg):

@@ -24,7 +24,8 @@ from ..core.cli import UsageError
 from ..core.params import default_config_dir
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import channel_ok, declare_and_validate, latched_qos, node_base, run, stream_qos
+from .common import (channel_ok, declare_and_validate, latched_qos, node_base, publish_counted,
+                     run, stream_qos)
 
 
 def state_publishers(node, topic: str) -> list[str]:
@@ -366,12 +367,7 @@ def make_node(params: dict):
                 valve[i] = bool(v[f'valve_open_{i}'])
                 enabled[i] = bool(v[f'drive_enabled_{i}'])
                 fault[i] = bool(v[f'drive_fault_{i}'])
-            try:
-                self.pub_state.publish(s)
-            except Exception as err:        # e.g. RCLError under DDS overload: count, go on
-                self.c.bump('publish_errors')
-                self.get_logger().error(f'publishing state {self.k} failed: {err}',
-                                        throttle_duration_sec=1.0)
+            publish_counted(self, self.pub_state, s, f'state {self.k}')
 
         # ---- diagnostics (executor thread) ----
         @diag.reader

@@ -16,7 +16,8 @@ from ..core.plant import EhaPlant
 from ..core.plant_sim_params import SCHEMA
 from ..core.stats import Counters, Histogram, RingStats
 from . import diag
-from .common import channel_ok, declare_and_validate, latched_qos, node_base, run, stream_qos
+from .common import (channel_ok, declare_and_validate, latched_qos, node_base, publish_counted,
+                     run, stream_qos)
 
 
 class CommandGate:
@@ -198,12 +199,7 @@ def make_node(params: dict):
                 enabled[i] = bool(m.drive_enabled[i])
                 fault[i] = bool(m.drive_fault[i])
             self.state_time = time.perf_counter()
-            try:
-                self.pub_state.publish(s)
-            except Exception as err:        # e.g. RCLError under DDS overload: count, go on
-                self.c.bump('publish_errors')
-                self.get_logger().error(f'publishing state {self.k} failed: {err}',
-                                        throttle_duration_sec=1.0)
+            publish_counted(self, self.pub_state, s, f'state {self.k}')
             if not self.pub_truth.get_subscription_count():
                 return                            # nobody listens: skip building the truth
             t = self.truth_msg

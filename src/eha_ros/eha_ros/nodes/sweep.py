@@ -93,10 +93,7 @@ def make_node(params: dict):
                 self.end()
 
         def on_state(self, msg):
-            t0 = time.perf_counter()
-            self.loop.arrived(t0)
-            self.handle_state(msg)
-            self.loop.executed(time.perf_counter() - t0)
+            self.loop.timed(self.handle_state, msg)
 
         def handle_state(self, msg):
             s = self.session

@@ -99,10 +99,7 @@ def make_node(params: dict):
             self.estimate_ok = not (msg.stale or msg.update_skipped or msg.sensor_fault)
 
         def on_state(self, msg):
-            t0 = time.perf_counter()
-            self.loop.arrived(t0)
-            self.handle_state(msg)
-            self.loop.executed(time.perf_counter() - t0)
+            self.loop.timed(self.handle_state, msg)
 
         def handle_state(self, msg):
             values = (msg.position, msg.pressure_a, msg.pressure_b, *msg.motor_speed,
