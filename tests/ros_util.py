@@ -104,3 +104,12 @@ def wait_for(pred, timeout: float, period: float = 0.02) -> bool:
             return True
         time.sleep(period)
     return pred()
+
+
+def wait_matched(*publishers, timeout: float = 60.0):
+    """Block until every publisher has matched a subscriber: a message published before
+    discovery has paired the two ends is dropped (volatile QoS), and a loaded machine can take
+    seconds to discover a new publisher."""
+    assert wait_for(lambda: all(p.get_subscription_count() > 0 for p in publishers), timeout), \
+        'no subscriber matched: ' + ', '.join(p.topic_name for p in publishers
+                                              if p.get_subscription_count() == 0)

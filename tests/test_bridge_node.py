@@ -15,7 +15,7 @@ from eha_ros.core.bridge.peer import AdsPeer
 from eha_ros.core.bridge.symbols import load_symbol_map
 from eha_ros.core.plant_sim_params import SCHEMA as SIM
 from eha_ros.stack import node_command
-from ros_util import start_process, stop_process, wait_for
+from ros_util import start_process, stop_process, wait_for, wait_matched
 from test_bridge_core import MAP, free_port, write_map
 
 pytestmark = pytest.mark.ros
@@ -148,6 +148,7 @@ class Probe:
 def probe(bridge, peer, ros_node):
     p = Probe(ros_node)
     assert wait_for(lambda: len(p.states) > 200, 60), 'no /eha/state from hardware_bridge'
+    wait_matched(p.cmd_pub)
     assert p.wait_diag(lambda d: d.get('link_up') == 'True'), p.diag()
     return p
 

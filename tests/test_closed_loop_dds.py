@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from eha_ros.stack import Stack
-from ros_util import wait_for
+from ros_util import wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
 
@@ -67,6 +67,7 @@ class Bench:
 def bench(stack, ros_node):
     b = Bench(ros_node)
     assert wait_for(lambda: len(b.truth) > 500, 60), 'no truth from plant_sim'
+    wait_matched(b.ref, b.load)
     return b
 
 

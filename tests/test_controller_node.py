@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from eha_ros.stack import node_command
-from ros_util import start_process, stop_process, wait_for
+from ros_util import start_process, stop_process, wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
 
@@ -57,6 +57,7 @@ def ctl(ros_node):
     est = FakeEstimator(ros_node)
     try:
         assert wait_for(lambda: len(est.commands) > 100, 60), 'controller does not answer'
+        wait_matched(est.ref_pub)
         yield est
     finally:
         est.close()

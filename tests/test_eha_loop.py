@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from eha_ros.stack import Stack
-from ros_util import wait_for
+from ros_util import wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
 
@@ -54,6 +54,7 @@ def listener(loop, ros_node):
     lis = Listener(ros_node)
     assert wait_for(lambda: len(lis.command) > 1000 and len(lis.truth) > 1000, 90), \
         f'no stream from eha_loop (exited: {loop.dead()})'
+    wait_matched(lis.ref)
     return lis
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from eha_ros.stack import node_command
-from ros_util import start_process, stop_process, wait_for
+from ros_util import start_process, stop_process, wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
 D_P, A_P = 6.684e-7, 2.572e-3
@@ -108,6 +108,7 @@ def plant_proc():
 def probe(plant_proc, ros_node):
     p = Probe(ros_node)
     assert wait_for(lambda: len(p.states) > 50, 60), 'no /eha/state from plant_sim'
+    wait_matched(p.cmd_pub, p.load_pub)
     return p
 
 
@@ -224,6 +225,7 @@ def test_lockstep_steps_only_on_command(ros_node):
         ros_node.create_subscription(Clock, '/clock', clocks.append, 100)
         pub = ros_node.create_publisher(ActuatorCommand, '/ls/eha/command', 10)
         assert wait_for(lambda: len(states) >= 1, 60)
+        wait_matched(pub)
         for k in range(20):
             seq = states[-1].seq
             pub.publish(ActuatorCommand(seq=seq, motor_speed_ref=10.0))
