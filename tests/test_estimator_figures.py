@@ -15,30 +15,44 @@ def rms(a):
     return float(np.sqrt(np.mean(np.square(a))))
 
 
+SEEDS = (1, 2, 3, 4)
+
+
 @pytest.fixture(scope='module')
 def sine_1hz(params):
-    """12 s of a 1 Hz, 5 mm sine; statistics over the last 8 s (after the filter settled)."""
-    run = batch.closed_loop(params, batch.sine(5e-3, 1.0), 12.0, seed=1)
+    """30 s of a 1 Hz, 5 mm sine per seed; statistics over 6-30 s (filter and loop settled).
+    Several seeds and 24 s each: the sensor's 1 Hz Gauss-Markov wander averages out only
+    over seconds, so one short run says little (12 s windows range 0.13-0.39 for the same
+    filter)."""
+    out = []
+    for seed in SEEDS:
+        run = batch.closed_loop(params, batch.sine(5e-3, 1.0), 30.0, seed=seed)
+        s = run.t >= 6.0
+        est, raw = rms(run.estimate[s] - run.truth[s]), rms(run.measured[s] - run.truth[s])
+        print(f'\n1 Hz 5 mm sine, seed {seed}: estimate RMSE {est * 1e6:.2f} um, raw sensor RMSE '
+              f'{raw * 1e6:.2f} um, ratio {est / raw:.3f} (goal <= 0.25)')
+        out.append((est, raw))
+    return out
+
+
+def test_rmse_quarter_of_raw_sensor_during_1hz_5mm_sine(sine_1hz):
+    """Chamber-pressure filter (the default, chamber_kf): every seed meets the goal."""
+    for est, raw in sine_1hz:
+        assert est <= 0.25 * raw
+
+
+def test_eq4_35_filter_rmse_during_1hz_5mm_sine(params):
+    """The eq. 4.35 filter (estimator.model.structure eq4_35) on the same test: its lumped p_D
+    row misses the boost circuit (one chamber compresses, C_r times the cracking pressure),
+    a 1 Hz model error it cannot tell from the sensor's Gauss-Markov wander. Regression guard
+    of what it achieves (about 0.35), and the reason the chamber filter is the default."""
+    p = dict(params)
+    p['estimator.model.structure'] = 'eq4_35'
+    run = batch.closed_loop(p, batch.sine(5e-3, 1.0), 12.0, seed=1)
     s = run.t >= 4.0
     est, raw = rms(run.estimate[s] - run.truth[s]), rms(run.measured[s] - run.truth[s])
-    print(f'\n1 Hz 5 mm sine: estimate RMSE {est * 1e6:.2f} um, raw sensor RMSE '
-          f'{raw * 1e6:.2f} um, ratio {est / raw:.3f} (goal <= 0.25)')
-    return est, raw
-
-
-@pytest.mark.xfail(strict=True, reason='measured ratio ~0.34 (seed 1): the eq. 4.35 model '
-                   'misses the boost-circuit flows of the nonlinear plant (per-port leakage '
-                   'to the accumulator + check valves), giving a ~+-9 um 1 Hz model error '
-                   'that the filter cannot tell from the sensor\'s 1 Hz Gauss-Markov noise')
-def test_rmse_quarter_of_raw_sensor_during_1hz_5mm_sine(sine_1hz):
-    est, raw = sine_1hz
-    assert est <= 0.25 * raw
-
-
-def test_rmse_well_below_raw_sensor_during_1hz_5mm_sine(sine_1hz):
-    """Regression guard of what the filter achieves today (see the xfail above)."""
-    est, raw = sine_1hz
-    assert est <= 0.4 * raw
+    print(f'\neq. 4.35 filter: ratio {est / raw:.3f}')
+    assert 0.25 * raw < est <= 0.45 * raw
 
 
 def test_phase_of_estimate_at_7hz_within_10_degrees(params):

@@ -57,6 +57,7 @@ def batch_cost(n: int = 20000) -> dict:
     data = _recorded_measurements(base, n)
     for name, over in (('model', {}),
                        ('model_position_only', {'estimator.measurements': 'position'}),
+                       ('model_eq4_35', {'estimator.model.structure': 'eq4_35'}),
                        ('pva', {'estimator.filter': 'pva'})):
         p = dict(base)
         p.update(over)
@@ -74,20 +75,20 @@ def batch_cost(n: int = 20000) -> dict:
         for d in data:
             t0 = time.perf_counter_ns()
             kf.predict(float(d[1][0]), d[2] - d[3]) if est.is_model else kf.predict()
-            kf.update(d[0], d[2] - d[3])
+            kf.update(d[0], d[2], d[3])
             dt.append((time.perf_counter_ns() - t0) * 1e-9)
         res.update(_stats(f'filter_step_{name}', dt))
-    # filterpy reference on the same matrices (model KF, position + p_D)
+    # filterpy reference on the same matrices (default model KF, position + p_A, p_B)
     from filterpy.kalman import KalmanFilter
     est = Estimator(base)
     kf = est.kf
-    f = KalmanFilter(dim_x=kf.n, dim_z=kf.H.shape[0], dim_u=2)
+    f = KalmanFilter(dim_x=kf.n, dim_z=kf.H.shape[0], dim_u=len(kf.u))
     f.F, f.B, f.Q, f.H, f.R, f.P, f.x = kf.F.copy(), kf.G, kf.Q, kf.H, kf.R, kf.P0.copy(), \
         kf.x.copy()
     dt = []
     for d in data[:5000]:
-        z = np.array((d[0], d[2] - d[3]))
-        u = np.array((float(d[1][0]), 0.0))
+        z = np.array((d[0], d[2], d[3]))
+        u = np.array((float(d[1][0]), 0.0, 1.0))
         t0 = time.perf_counter_ns()
         f.predict(u=u)
         f.update(z)

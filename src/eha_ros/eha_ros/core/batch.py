@@ -266,7 +266,7 @@ def _dummy_estimator():
     from .estimator import stepper as ES
     v, m = np.zeros(2), np.zeros((2, 2))
     return np.zeros(ES.NK), np.zeros(ES.NE), (v, m, m, m, v, m, m, m, m, v, m, m, m, v, m, v,
-                                             v, v, v)
+                                             v, v, v, m, m)
 
 
 def _dummy_manager():

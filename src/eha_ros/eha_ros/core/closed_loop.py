@@ -88,7 +88,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
     Python's) / NOISE (draw the next noise block, call again), u the last command.
     """
     S, P, U, T, block, meas, aux, ring, table = plant
-    ek, ee, x, Pe, F, G, ue, Q, tmp, H, R, y, Sy, H1, R1, y1, S1, g_leak, z2, z1, ws = est
+    ek, ee, x, Pe, F, G, ue, Q, tmp, H, R, y, Sy, H1, R1, y1, S1, g_leak, z2, z1, ws, Fm, Gm = est
     ck, cc, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt = ctl
     hk, mk, ms, hs, g = mgr
     keep = (x.copy(), Pe.copy(), ee.copy(), cc.copy(), Fx.copy(), Rx.copy(), ms.copy(),
@@ -124,7 +124,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         if has_est:
             x_hat, innov, nis, nd, code = ES.estimate(
                 ek, ee, x, Pe, F, G, ue, Q, tmp, H, R, y, Sy, H1, R1, y1, S1, g_leak, z2, z1, ws,
-                pos, meas[L.M_W0 + ch], pa, pb)
+                Fm, Gm, pos, meas[L.M_W0 + ch], pa, pb)
         else:
             x_hat, innov, nis, nd, code = pos, math.nan, math.nan, 0, 0
         CS.request(ck, cc, ref)

@@ -17,6 +17,7 @@ from ..plant.parameters import PlantParams
 from ..stats import Counters
 from . import fault_detector as fd
 from . import kernels
+from .chamber_kf import ChamberKF, Circuit
 from .model_kf import HydroMech, ModelKF
 from .pva import PvaKF
 
@@ -50,18 +51,33 @@ def hydromech(pp: PlantParams, leakage: str) -> HydroMech:
                      2.0 if leakage == 'eq3_22' else 1.0)
 
 
+def circuit(pp: PlantParams) -> Circuit:
+    """Constants of the chamber model from the plant parameters (Fig. 3.12 boost circuit)."""
+    return Circuit(pp.A_p, pp.m_p, pp.b, pp.beta, pp.V_d, pp.C_p + pp.C_c, pp.C_r, pp.D_p,
+                   pp.check_K, pp.acc_p_init, pp.check_crack, pp.band)
+
+
 def build_filter(p: dict):
     """The configured filter (model KF of eq. 4.35 or PVA of eq. 4.30-4.34) from parameters."""
     pp = PlantParams.from_dict(p)
     e = 'estimator.'
     if p[e + 'filter'] == 'pva':
         return PvaKF(pp.Ts, p[e + 'pva.W'], p[e + 'pva.R'], p[e + 'pva.p0'])
-    h = hydromech(pp, p[e + 'model.pd_leakage'])
     sig, gm_sig = p[e + 'noise.position_sigma'], p[e + 'noise.position_gm_sigma']
     gm = (gm_sig, p[e + 'noise.position_gm_corner']) if p[e + 'model.sensor_gm'] else None
     R_pos = sig ** 2 if gm else sig ** 2 + gm_sig ** 2
-    R_pd = 2.0 * p[e + 'noise.pressure_sigma'] ** 2 \
-        if p[e + 'measurements'] == 'position_pressure' else None
+    with_p = p[e + 'measurements'] == 'position_pressure'
+    if p[e + 'model.structure'] == 'chambers':
+        q = list(p[e + 'model.q'][:2]) + [p[e + 'model.q_chamber']]
+        kf = ChamberKF(circuit(pp), pp.Ts, q, p[e + 'model.p0'], R_pos,
+                       p[e + 'noise.pressure_sigma'] ** 2 if with_p else None, gm,
+                       F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
+                       q_load=p[e + 'model.q_load'] if p[e + 'model.load_state'] else None,
+                       p0_load=p[e + 'model.p0_load'])
+        kf.friction_uses_pressure = p[e + 'model.friction_pressure']
+        return kf
+    h = hydromech(pp, p[e + 'model.pd_leakage'])
+    R_pd = 2.0 * p[e + 'noise.pressure_sigma'] ** 2 if with_p else None
     kf = ModelKF(h, pp.Ts, p[e + 'model.q'], p[e + 'model.p0'], R_pos, R_pd, gm,
                  F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
                  q_leak=p[e + 'model.q_leak'] if p[e + 'model.leak_state'] else None,
@@ -83,7 +99,8 @@ class Estimator:
         e = 'estimator.'
         self.Ts = pp.Ts
         self.kf = build_filter(params)
-        self.is_model = isinstance(self.kf, ModelKF)
+        self.chambers = isinstance(self.kf, ChamberKF)
+        self.is_model = self.chambers or isinstance(self.kf, ModelKF)
         self.use_pressure = self.is_model and self.kf.with_pressure
         self.x_max = 0.5 * pp.stroke + params[e + 'validity.position_margin']
         self.p_min = params[e + 'validity.pressure_min']
@@ -156,7 +173,7 @@ class Estimator:
             if not pos_ok:
                 self.counters.bump('skipped_updates')
                 return self._result(0.0, 0.0, True, ','.join(reasons), 0)
-            self.kf.reset(position, self.pd_meas if pr_ok else 0.0)
+            self.kf.reset(position, *((pressure_a, pressure_b) if pr_ok else ()))
             self.pd_filt = self.pd_meas
             self.omega_prev = w
             self.started = True
@@ -180,8 +197,8 @@ class Estimator:
             y, S = self.kf.innovation_only(position)
             self.detector.update(position, y, S)
             return self._result(y, y * y / S, True, ','.join(reasons), 0)
-        pd_z = self.pd_meas if (pr_ok and self.use_pressure) else None
-        y, S, nis, m = self.kf.update(position, pd_z)
+        y, S, nis, m = self.kf.update(position, *((pressure_a, pressure_b)
+                                                  if pr_ok and self.use_pressure else ()))
         self.updates += 1
         self.detector.update(position, y, S)
         if self.chinniah is not None and pr_ok:

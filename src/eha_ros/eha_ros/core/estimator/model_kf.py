@@ -58,6 +58,7 @@ class HydroMech:
     C_eq: float
     D_p: float
     leak_factor: float = 2.0
+    stiff_factor: float = 2.0
 
 
 def continuous(h: HydroMech, gm_corner_hz: float | None = None):
@@ -68,13 +69,13 @@ def continuous(h: HydroMech, gm_corner_hz: float | None = None):
     A[0, 1] = 1.0
     A[1, 1] = -h.b / h.m_p
     A[1, 2] = h.A_p / h.m_p
-    A[2, 1] = -2.0 * h.A_p * h.beta / h.V_d
+    A[2, 1] = -h.stiff_factor * h.A_p * h.beta / h.V_d
     A[2, 2] = -h.leak_factor * h.C_eq * h.beta / h.V_d
     if gm_corner_hz is not None:
         A[3, 3] = -2.0 * math.pi * gm_corner_hz
     B = np.zeros((n, 2))
     B[1, 1] = 1.0 / h.m_p
-    B[2, 0] = 2.0 * h.D_p * h.beta / h.V_d
+    B[2, 0] = h.stiff_factor * h.D_p * h.beta / h.V_d
     return A, B
 
 
@@ -155,7 +156,7 @@ class ModelKF(kernels.StateView):
         self.i_leak = None
         if q_leak is not None:
             Bl = np.zeros((A.shape[0], 1))
-            Bl[2, 0] = -2.0 * h.beta / h.V_d * LEAK_UNIT
+            Bl[2, 0] = -h.stiff_factor * h.beta / h.V_d * LEAK_UNIT
             self._g_leak = zoh(A, Bl, Ts)[1][:, 0]     # ZOH column of a unit correction
             self.i_leak = len(q)
             q.append(q_leak)
@@ -189,9 +190,12 @@ class ModelKF(kernels.StateView):
         self._y1, self._S1 = np.zeros(1), np.zeros((1, 1))
         self.reset()
 
-    def reset(self, position: float = 0.0, p_D: float = 0.0):
+    def reset(self, position: float = 0.0, p_a: float | None = None,
+              p_b: float | None = None):
+        """Initial state at ``position`` with p_D = p_a - p_b (0 without pressures)."""
         self.x = np.zeros(self.n)
-        self.x[0], self.x[2] = position, p_D
+        self.x[0] = position
+        self.x[2] = 0.0 if p_a is None else p_a - p_b
         self.P = self.P0.copy()
 
     def predict(self, omega: float, p_D: float | None = None):
@@ -206,11 +210,12 @@ class ModelKF(kernels.StateView):
             self.F[:self._n_lin, self.i_leak] = self._g_leak * pd
         kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
 
-    def update(self, z_pos: float, p_D: float | None = None):
-        """Measurement update with the position (and p_D when configured and given).
-        Returns (position innovation, its variance S_00, NIS of the whole measurement, m)."""
-        if self.with_pressure and p_D is not None:
-            z = np.array((z_pos, p_D))
+    def update(self, z_pos: float, p_a: float | None = None, p_b: float | None = None):
+        """Measurement update with the position (and p_D = p_a - p_b when configured and
+        given). Returns (position innovation, its variance S_00, NIS of the whole measurement,
+        m)."""
+        if self.with_pressure and p_a is not None:
+            z = np.array((z_pos, p_a - p_b))
             nis = kernels.update(self.x, self.P, self.H, self.R, z, self.y, self.S)
             return float(self.y[0]), float(self.S[0, 0]), float(nis), 2
         nis = kernels.update(self.x, self.P, self.H1, self.R1, np.array((z_pos,)), self._y1,

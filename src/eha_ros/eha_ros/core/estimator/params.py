@@ -16,12 +16,15 @@ ESTIMATOR = Schema('estimator', [
           choices=('position', 'position_pressure'),
           doc='model KF measurement set: position, or position and p_D = p_A - p_B'),
     # model of eq. 4.35
+    Param(E + 'model.structure', 'str', '', 'chambers', choices=('chambers', 'eq4_35'),
+          doc='chambers = states x, xdot, p_A, p_B with the boost check valves (chamber_kf); '
+              'eq4_35 = states x, xdot, p_D of eq. 4.35 (model_kf)'),
     Param(E + 'model.pd_leakage', 'str', '', 'eq3_22', choices=('boost', 'eq3_22', 'eq4_35'),
           doc='p_D leakage: boost = 2 (C_p+C_c+C_r) beta/V_d, eq3_22 = 2 C_eq beta/V_d, '
               'eq4_35 = C_eq beta/V_d'),
     Param(E + 'model.F_s', 'float', 'N', 800.0, 0.0, 1.0e5,
           doc='friction bound of eq. 4.36'),
-    Param(E + 'model.v_eps', 'float', 'm/s', 3.0e-3, 1.0e-6, 0.1,
+    Param(E + 'model.v_eps', 'float', 'm/s', 1.0e-2, 1.0e-6, 0.1,
           doc='pump-flow velocity over which eq. 4.36 friction reaches full sign'),
     Param(E + 'model.friction_pressure', 'bool', '', False,
           doc='use the measured p_D in min(|p_D A_p|, F_s) of eq. 4.36 (adds pressure noise)'),
@@ -32,7 +35,9 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.leak_state', 'bool', '', True,
           doc='add a leakage-coefficient correction state (1e-12 m^3/(s Pa) units)'),
     Param(E + 'model.q', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-16, 1e-10, 1e6], 0.0, 1e20,
-          min_len=3, doc='per-step process noise variances of x, xdot, p_D'),
+          min_len=3, doc='per-step process noise variances of x, xdot, p_D (p_D: eq4_35 only)'),
+    Param(E + 'model.q_chamber', 'float', 'Pa^2', 1.0e4, 0.0, 1e20,
+          doc='per-step process noise variance of each chamber pressure (chambers structure)'),
     Param(E + 'model.p0', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-8, 1e-4, 1e10], 0.0, 1e20,
           min_len=3, doc='initial variances of x, xdot, p_D'),
     Param(E + 'model.q_leak', 'float', '(1e-12 m^3/(s Pa))^2', 1e-8, 0.0, 1e6,

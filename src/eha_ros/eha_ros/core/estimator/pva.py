@@ -32,7 +32,8 @@ class PvaKF(kernels.StateView):
         self.y, self.S = np.zeros(1), np.zeros((1, 1))
         self.reset()
 
-    def reset(self, position: float = 0.0, p_D: float = 0.0):
+    def reset(self, position: float = 0.0, p_a: float | None = None, p_b: float | None = None):
+        """Initial state at ``position`` at rest (pressures unused: the PVA model has none)."""
         self.x = np.array([position, 0.0, 0.0])
         self.P = self.P0.copy()
 
@@ -40,8 +41,8 @@ class PvaKF(kernels.StateView):
         """One Ts of eq. 4.30 (inputs ignored: the PVA model has none)."""
         kernels.predict(self.x, self.P, self.F, self.G, self._u, self.Q, self._tmp)
 
-    def update(self, z_pos: float, p_D: float | None = None):
-        """Position update; returns (innovation, S, NIS, measurement dimension 1)."""
+    def update(self, z_pos: float, p_a: float | None = None, p_b: float | None = None):
+        """Position update (pressures unused); returns (innovation, S, NIS, measurement dimension 1)."""
         nis = kernels.update(self.x, self.P, self.H, self.R, np.array((z_pos,)), self.y, self.S)
         return float(self.y[0]), float(self.S[0, 0]), float(nis), 1
 

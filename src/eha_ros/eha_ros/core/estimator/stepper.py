@@ -25,14 +25,16 @@ K_MODEL, K_USE_P, K_FRIC_P, K_ILEAK, K_NLIN = 5, 6, 7, 8, 9
 K_AP, K_DP, K_FS, K_VEPS, K_ISOLATE = 10, 11, 12, 13, 14
 K_JUMP, K_JUMP_N, K_STUCK_N, K_STUCK_TOL, K_DRIFT_K, K_DRIFT_H, K_DRIFT_N, K_HOLD = \
     15, 16, 17, 18, 19, 20, 21, 22
-NK = 23
+K_CHAMBERS, K_PC = 23, 24
+NK = 25
 # state
 E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
 E_NJUMP, E_NSAME, E_NDRIFT, E_GPOS, E_GNEG, E_ZPREV, E_HAS_ZPREV = 4, 5, 6, 7, 8, 9, 10
 E_HOLD = 11            # 3 entries: JUMP, STUCK, DRIFT
 E_DET = 14             # 3 entries
 E_CODE = 17
-NE = 18
+E_MODE = 18            # check-valve state of the chamber filter
+NE = 19
 CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
 
 
@@ -55,7 +57,11 @@ def pack(est):
         k[K_FRIC_P] = kf.friction_uses_pressure
         k[K_ILEAK] = -1.0 if kf.i_leak is None else kf.i_leak
         k[K_NLIN] = kf._n_lin
-        k[K_AP], k[K_DP], k[K_FS], k[K_VEPS] = kf.h.A_p, kf.h.D_p, kf.F_s, kf.v_eps
+        c = kf.c if est.chambers else kf.h
+        k[K_AP], k[K_DP], k[K_FS], k[K_VEPS] = c.A_p, c.D_p, kf.F_s, kf.v_eps
+    k[K_CHAMBERS] = est.chambers
+    if est.chambers:
+        k[K_PC] = kf.c.p_c
     k[K_JUMP], k[K_JUMP_N] = d.jump_threshold, d.jump_debounce
     k[K_STUCK_N], k[K_STUCK_TOL] = d.stuck_samples, d.stuck_tolerance
     k[K_DRIFT_K], k[K_DRIFT_H], k[K_DRIFT_N] = d.drift_k, d.drift_h, d.drift_debounce
@@ -70,6 +76,12 @@ def pack(est):
     for i, c in enumerate(CODES):
         e[E_HOLD + i], e[E_DET + i] = d.hold[c], d.detections[c]
     e[E_CODE] = d.code
+    F, G = kf.F, kf.G
+    Fm, Gm = np.zeros((1, 1)), np.zeros((1, 1))
+    if est.chambers:
+        e[E_MODE] = kf.mode
+        F, G = F.copy(), G.copy()           # overwritten per tick with the mode's pair
+        Fm, Gm = np.vstack([f for f, _ in kf.modes]), np.vstack([g for _, g in kf.modes])
     if est.is_model:
         u = kf.u
         g_leak = kf._g_leak if kf.i_leak is not None else np.zeros(1)
@@ -77,9 +89,9 @@ def pack(est):
     else:
         u, g_leak = kf._u, np.zeros(1)
         H1, R1, y1, S1 = kf.H, kf.R, kf.y, kf.S
-    ws = np.zeros(workspace_size(len(kf.x), 2))
-    arrays = (kf.x, kf.P, kf.F, kf.G, u, kf.Q, kf._tmp, kf.H, kf.R, kf.y, kf.S, H1, R1, y1, S1,
-              g_leak, np.zeros(2), np.zeros(1), ws)
+    ws = np.zeros(workspace_size(len(kf.x), 3))
+    arrays = (kf.x, kf.P, F, G, u, kf.Q, kf._tmp, kf.H, kf.R, kf.y, kf.S, H1, R1, y1, S1,
+              g_leak, np.zeros(kf.H.shape[0]), np.zeros(1), ws, Fm, Gm)
     return k, e, arrays
 
 
@@ -94,6 +106,10 @@ def unpack(est, e) -> None:
     for i, c in enumerate(CODES):
         d.hold[c], d.detections[c] = int(e[E_HOLD + i]), int(e[E_DET + i])
     d.code = int(e[E_CODE])
+    if est.chambers:
+        kf = est.kf
+        kf.mode = int(e[E_MODE])
+        kf.F, kf.G = kf.modes[kf.mode]
 
 
 @njit(cache=True)
@@ -170,16 +186,30 @@ def detect(k, e, z, innovation, S) -> None:
 
 
 @njit(cache=True)
-def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, z2, z1, ws,
-             position, w, pa, pb):
-    """Estimator.update on a ready() measurement: (position, innovation, nis, nis_dim, code)."""
+def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm, z1, ws,
+             Fm, Gm, position, w, pa, pb):
+    """Estimator.update on a ready() measurement: (position, innovation, nis, nis_dim, code).
+    Chamber filter: (F, G) of the check-valve state are copied from the stacked Fm, Gm."""
     pr_ok = pressure_ok(k, pa, pb)
     if pr_ok:
         e[E_PD_MEAS] = pa - pb
     omega = 0.5 * (e[E_OMEGA] + w)
     e[E_OMEGA] = w
     use_p = k[K_USE_P] > 0.5
-    if k[K_MODEL] > 0.5:
+    if k[K_CHAMBERS] > 0.5:
+        u[0] = omega
+        pd = e[E_PD_FILT] if use_p else x[2] - x[3]
+        u[1] = friction_estimate(omega, pd, k[K_FRIC_P] > 0.5, k[K_AP], k[K_DP], k[K_FS],
+                                 k[K_VEPS])
+        mode = 2 * (x[2] < k[K_PC]) + (x[3] < k[K_PC])
+        e[E_MODE] = mode
+        n = x.shape[0]
+        for i in range(n):
+            for j in range(n):
+                F[i, j] = Fm[mode * n + i, j]
+            for j in range(G.shape[1]):
+                G[i, j] = Gm[mode * n + i, j]
+    elif k[K_MODEL] > 0.5:
         u[0] = omega
         has_pd = use_p and k[K_FRIC_P] > 0.5
         u[1] = friction_estimate(omega, e[E_PD_FILT], has_pd, k[K_AP], k[K_DP], k[K_FS],
@@ -193,10 +223,14 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, z2
     if pr_ok:
         e[E_PD_FILT] += k[K_ALPHA_PD] * (e[E_PD_MEAS] - e[E_PD_FILT])
     if pr_ok and use_p:
-        z2[0] = position
-        z2[1] = e[E_PD_MEAS]
-        nis = update_ws(x, P, H, R, z2, y, S, ws)
-        innov, s00, m = y[0], S[0, 0], 2
+        zm[0] = position
+        if k[K_CHAMBERS] > 0.5:
+            zm[1] = pa
+            zm[2] = pb
+        else:
+            zm[1] = e[E_PD_MEAS]
+        nis = update_ws(x, P, H, R, zm, y, S, ws)
+        innov, s00, m = y[0], S[0, 0], zm.shape[0]
     else:
         z1[0] = position
         nis = update_ws(x, P, H1, R1, z1, y1, S1, ws)
