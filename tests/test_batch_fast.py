@@ -130,3 +130,15 @@ def test_batch_stack_run_equals_ticks_through_an_acceleration_limited_step():
     assert a.controller.ref.rate == b.controller.ref.rate == 0.0
     assert b._loop.fast_ticks >= n - 2
     assert max(fast['truth']) < 5e-3 * 1.05              # the issue 6 overshoot bound
+
+
+def test_bench_batch_component_replay_matches_the_stepper_layouts():
+    """scripts/bench batch replays a recorded run through each compiled stepper alone; it
+    unpacks the steppers' array tuples itself, so a layout change must keep it running."""
+    from eha_ros.bench import batch as bb
+    loop, refs, loads = bb.build(bb.scenario(0.2))
+    rec = loop.run(refs, loads)
+    out = bb.components(rec, refs, loads, repeats=1)
+    assert sorted(out) == sorted(f'batch_component_{c}_us_per_tick' for c in
+                                 ('plant', 'estimator', 'controller', 'switch_manager'))
+    assert all(0 < v < 1e4 for v in out.values()), out

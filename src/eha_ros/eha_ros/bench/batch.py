@@ -186,11 +186,11 @@ def components(rec, refs, loads, repeats: int = 3) -> dict:
 
 @njit(cache=True)
 def _estimator(ek, ee, ea, x, w, pa, pb):
-    xs, Pe, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, z2, z1, ws = ea
+    xs, Pe, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, z2, z1, ws, Fm, Gm = ea
     s = 0.0
     for k in range(x.shape[0]):
         r = ES.estimate(ek, ee, xs, Pe, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, z2,
-                        z1, ws, x[k], w[k], pa[k], pb[k])
+                        z1, ws, Fm, Gm, x[k], w[k], pa[k], pb[k])
         s += r[0]
     return s
 
