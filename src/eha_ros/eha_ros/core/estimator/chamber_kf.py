@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernels
-from .model_kf import friction_estimate, zoh
+from .model_kf import MeasuredKF, friction_estimate, zoh
 
 
 @dataclass(frozen=True)
@@ -85,7 +85,7 @@ def continuous(c: Circuit, s_a: bool, s_b: bool, gm_corner_hz: float | None = No
     return A, B
 
 
-class ChamberKF(kernels.StateView):
+class ChamberKF(MeasuredKF):
     """Discrete Kalman filter of the chamber model (predict eq. 4.1-4.2, Joseph update
     eq. 4.4-4.6), measurements position (+ b) and, when given, p_A and p_B.
 
@@ -134,24 +134,9 @@ class ChamberKF(kernels.StateView):
         self.mode = 0
         self.Q = np.diag(np.asarray(q, float))
         self.P0 = np.diag(np.asarray(p0, float))
-        self.with_pressure = R_p is not None
-        m = 3 if self.with_pressure else 1
-        self.H = np.zeros((m, n))
-        self.H[0, 0] = 1.0
-        if gm is not None:
-            self.H[0, 4] = 1.0
-        r = [R_pos]
-        if self.with_pressure:
-            self.H[1, 2] = self.H[2, 3] = 1.0
-            r += [R_p, R_p]
-        self.R = np.diag(np.asarray(r, float))
-        self.H1, self.R1 = self.H[:1].copy(), self.R[:1, :1].copy()
-        self._tmp = np.empty((n, n))
+        self._measurements(n, None if gm is None else 4, R_pos, (2, 3), R_p)
         self.u = np.zeros(3)
         self.u[2] = 1.0
-        self.y = np.zeros(m)
-        self.S = np.zeros((m, m))
-        self._y1, self._S1 = np.zeros(1), np.zeros((1, 1))
         self.reset()
 
     def reset(self, position: float = 0.0, p_a: float | None = None,
@@ -175,28 +160,12 @@ class ChamberKF(kernels.StateView):
         self.F, self.G = self.modes[self.mode]
         kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
 
-    def update(self, z_pos: float, p_a: float | None = None, p_b: float | None = None):
-        """Measurement update with the position (and both chamber pressures when configured
-        and given). Returns (position innovation, its variance S_00, NIS, m)."""
-        if self.with_pressure and p_a is not None:
-            z = np.array((z_pos, p_a, p_b))
-            nis = kernels.update(self.x, self.P, self.H, self.R, z, self.y, self.S)
-            return float(self.y[0]), float(self.S[0, 0]), float(nis), 3
-        nis = kernels.update(self.x, self.P, self.H1, self.R1, np.array((z_pos,)), self._y1,
-                             self._S1)
-        return float(self._y1[0]), float(self._S1[0, 0]), float(nis), 1
-
-    def innovation_only(self, z_pos: float):
-        y = z_pos - float(self.H[0] @ self.x)
-        return y, float(self.H[0] @ self.P @ self.H[0] + self.R[0, 0])
+    def pressure_z(self, p_a: float, p_b: float) -> tuple:
+        return (p_a, p_b)
 
     @property
     def pressure_diff(self) -> float:
         return float(self.x[2] - self.x[3])
-
-    @property
-    def load_force(self) -> float:
-        return 0.0 if self.i_load is None else float(self.x[self.i_load])
 
     @property
     def leak_correction(self) -> float:

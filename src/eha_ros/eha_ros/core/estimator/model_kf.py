@@ -111,7 +111,59 @@ def friction_estimate(omega: float, p_D: float | None, A_p: float, D_p: float, F
 LEAK_UNIT = 1e-12      # m^3/(s Pa): unit of the leakage-coefficient correction state
 
 
-class ModelKF(kernels.StateView):
+class MeasuredKF(kernels.StateView):
+    """Measurement side shared by the model filters: position (+ pressures) update, the
+    innovation of a rejected sample, the external-force state. Subclasses set x, P, H, R
+    (and H1, R1 for position only), y, S, _y1, _S1, with_pressure, i_load and
+    :meth:`pressure_z`."""
+
+    def pressure_z(self, p_a: float, p_b: float) -> tuple:
+        """The pressure entries of the measurement vector."""
+        raise NotImplementedError
+
+    def _measurements(self, n: int, i_gm, R_pos: float, pressure_states, R_p):
+        """H, R: the position (+ the sensor offset state i_gm), then one row per pressure
+        state when R_p is given; H1, R1 position only; update buffers."""
+        self.with_pressure = R_p is not None
+        rows = list(pressure_states) if self.with_pressure else []
+        m = 1 + len(rows)
+        self.H = np.zeros((m, n))
+        self.H[0, 0] = 1.0
+        if i_gm is not None:
+            self.H[0, i_gm] = 1.0
+        for r, i in enumerate(rows, 1):
+            self.H[r, i] = 1.0
+        self.R = np.diag(np.asarray([R_pos] + [R_p] * len(rows), float))
+        self.H1, self.R1 = self.H[:1].copy(), self.R[:1, :1].copy()
+        self._tmp = np.empty((n, n))
+        self.y = np.zeros(m)
+        self.S = np.zeros((m, m))
+        self._y1, self._S1 = np.zeros(1), np.zeros((1, 1))
+
+    def update(self, z_pos: float, p_a: float | None = None, p_b: float | None = None):
+        """Measurement update (eq. 4.4-4.6, Joseph form) with the position, and the
+        pressures when configured and given. Returns (position innovation, its variance S_00,
+        NIS of the whole measurement, measurement dimension)."""
+        if self.with_pressure and p_a is not None:
+            z = np.array((z_pos,) + self.pressure_z(p_a, p_b))
+            nis = kernels.update(self.x, self.P, self.H, self.R, z, self.y, self.S)
+            return float(self.y[0]), float(self.S[0, 0]), float(nis), len(z)
+        nis = kernels.update(self.x, self.P, self.H1, self.R1, np.array((z_pos,)), self._y1,
+                             self._S1)
+        return float(self._y1[0]), float(self._S1[0, 0]), float(nis), 1
+
+    def innovation_only(self, z_pos: float):
+        """Position innovation and its variance without updating (for a rejected sample)."""
+        y = z_pos - float(self.H[0] @ self.x)
+        return y, float(self.H[0] @ self.P @ self.H[0] + self.R[0, 0])
+
+    @property
+    def load_force(self) -> float:
+        """Estimated external force F_d along +x (N), 0 without the state."""
+        return 0.0 if self.i_load is None else float(self.x[self.i_load])
+
+
+class ModelKF(MeasuredKF):
     """Discrete Kalman filter of eq. 4.35 (predict eq. 4.1-4.2, Joseph update eq. 4.4-4.6).
 
     States [x, xdot, p_D] then, optionally, the sensor's Gauss-Markov offset b (``gm`` =
@@ -171,23 +223,8 @@ class ModelKF(kernels.StateView):
             p0.append(p0_load)
         self.Q = np.diag(np.asarray(q, float))
         self.P0 = np.diag(np.asarray(p0, float))
-        self.with_pressure = R_pd is not None
-        m = 2 if self.with_pressure else 1
-        self.H = np.zeros((m, n))
-        self.H[0, 0] = 1.0
-        if gm is not None:
-            self.H[0, 3] = 1.0
-        r = [R_pos]
-        if self.with_pressure:
-            self.H[1, 2] = 1.0
-            r.append(R_pd)
-        self.R = np.diag(np.asarray(r, float))
-        self.H1, self.R1 = self.H[:1].copy(), self.R[:1, :1].copy()
-        self._tmp = np.empty((n, n))
+        self._measurements(n, None if gm is None else 3, R_pos, (2,), R_pd)
         self.u = np.zeros(2)
-        self.y = np.zeros(m)
-        self.S = np.zeros((m, m))
-        self._y1, self._S1 = np.zeros(1), np.zeros((1, 1))
         self.reset()
 
     def reset(self, position: float = 0.0, p_a: float | None = None,
@@ -210,31 +247,12 @@ class ModelKF(kernels.StateView):
             self.F[:self._n_lin, self.i_leak] = self._g_leak * pd
         kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
 
-    def update(self, z_pos: float, p_a: float | None = None, p_b: float | None = None):
-        """Measurement update with the position (and p_D = p_a - p_b when configured and
-        given). Returns (position innovation, its variance S_00, NIS of the whole measurement,
-        m)."""
-        if self.with_pressure and p_a is not None:
-            z = np.array((z_pos, p_a - p_b))
-            nis = kernels.update(self.x, self.P, self.H, self.R, z, self.y, self.S)
-            return float(self.y[0]), float(self.S[0, 0]), float(nis), 2
-        nis = kernels.update(self.x, self.P, self.H1, self.R1, np.array((z_pos,)), self._y1,
-                             self._S1)
-        return float(self._y1[0]), float(self._S1[0, 0]), float(nis), 1
-
-    def innovation_only(self, z_pos: float):
-        """Position innovation and its variance without updating (for a rejected sample)."""
-        y = z_pos - float(self.H[0] @ self.x)
-        return y, float(self.H[0] @ self.P @ self.H[0] + self.R[0, 0])
+    def pressure_z(self, p_a: float, p_b: float) -> tuple:
+        return (p_a - p_b,)                 # p_D
 
     @property
     def pressure_diff(self) -> float:
         return float(self.x[2])
-
-    @property
-    def load_force(self) -> float:
-        """Estimated external force F_d along +x (N), 0 without the state."""
-        return 0.0 if self.i_load is None else float(self.x[self.i_load])
 
     @property
     def leak_correction(self) -> float:
