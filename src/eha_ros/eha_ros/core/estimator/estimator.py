@@ -58,7 +58,8 @@ def circuit(pp: PlantParams) -> Circuit:
 
 
 def build_filter(p: dict):
-    """The configured filter (model KF of eq. 4.35 or PVA of eq. 4.30-4.34) from parameters."""
+    """The configured filter from parameters: the chamber-pressure model KF (chamber_kf), the
+    model KF of eq. 4.35 (model_kf) or the PVA filter of eq. 4.30-4.34."""
     pp = PlantParams.from_dict(p)
     e = 'estimator.'
     if p[e + 'filter'] == 'pva':

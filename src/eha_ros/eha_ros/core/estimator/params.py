@@ -14,14 +14,15 @@ ESTIMATOR = Schema('estimator', [
               '(eqs. 4.30-4.34)'),
     Param(E + 'measurements', 'str', '', 'position_pressure',
           choices=('position', 'position_pressure'),
-          doc='model KF measurement set: position, or position and p_D = p_A - p_B'),
+          doc='model KF measurement set: position, or position and the pressures (p_A, p_B '
+              'for chambers, p_D = p_A - p_B for eq4_35)'),
     # model of eq. 4.35
     Param(E + 'model.structure', 'str', '', 'chambers', choices=('chambers', 'eq4_35'),
           doc='chambers = states x, xdot, p_A, p_B with the boost check valves (chamber_kf); '
               'eq4_35 = states x, xdot, p_D of eq. 4.35 (model_kf)'),
     Param(E + 'model.pd_leakage', 'str', '', 'eq3_22', choices=('boost', 'eq3_22', 'eq4_35'),
-          doc='p_D leakage: boost = 2 (C_p+C_c+C_r) beta/V_d, eq3_22 = 2 C_eq beta/V_d, '
-              'eq4_35 = C_eq beta/V_d'),
+          doc='eq4_35 structure only: p_D leakage: boost = 2 (C_p+C_c+C_r) beta/V_d, '
+              'eq3_22 = 2 C_eq beta/V_d, eq4_35 = C_eq beta/V_d'),
     Param(E + 'model.F_s', 'float', 'N', 800.0, 0.0, 1.0e5,
           doc='friction bound of eq. 4.36'),
     Param(E + 'model.v_eps', 'float', 'm/s', 1.0e-2, 1.0e-6, 0.1,
@@ -33,7 +34,8 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.sensor_gm', 'bool', '', True,
           doc='add the position sensor Gauss-Markov offset as a state (coloured noise)'),
     Param(E + 'model.leak_state', 'bool', '', True,
-          doc='add a leakage-coefficient correction state (1e-12 m^3/(s Pa) units)'),
+          doc='eq4_35 structure only: add a leakage-coefficient correction state '
+              '(1e-12 m^3/(s Pa) units)'),
     Param(E + 'model.q', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-16, 1e-10, 1e6], 0.0, 1e20,
           min_len=3, doc='per-step process noise variances of x, xdot, p_D (p_D: eq4_35 only)'),
     Param(E + 'model.q_chamber', 'float', 'Pa^2', 1.0e4, 0.0, 1e20,
