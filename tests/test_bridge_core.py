@@ -194,32 +194,33 @@ def test_lockstep_peer_steps_once_per_heartbeat(plant_params, sum_mode):
         peer.stop()
 
 
-def test_unknown_symbol_found_at_connect(plant_params, tmp_path):
-    path = write_map(tmp_path, lambda s: s['pressure_b'].update(symbol='GVL_EHA.fPresure_B'))
+def connect_error(plant_params, tmp_path, edit) -> str:
+    """The one-line SymbolError of connecting with the symbol map changed by ``edit``."""
+    path = write_map(tmp_path, edit)
     peer, link = peer_and_link(plant_params, True, link_map=path)
     try:
         with pytest.raises(SymbolError) as err:
             link.connect()
         text = str(err.value)
-        assert '\n' not in text and "'GVL_EHA.fPresure_B'" in text and 'unknown symbol' in text
-        assert 'symbols.pressure_b.symbol' in text
+        assert '\n' not in text
+        return text
     finally:
         link.close()
         peer.stop()
+
+
+def test_unknown_symbol_found_at_connect(plant_params, tmp_path):
+    text = connect_error(plant_params, tmp_path,
+                         lambda s: s['pressure_b'].update(symbol='GVL_EHA.fPresure_B'))
+    assert "'GVL_EHA.fPresure_B'" in text and 'unknown symbol' in text
+    assert 'symbols.pressure_b.symbol' in text
 
 
 def test_wrong_type_found_at_connect(plant_params, tmp_path):
-    path = write_map(tmp_path, lambda s: s['position'].update(type='REAL'))
-    peer, link = peer_and_link(plant_params, True, link_map=path)
-    try:
-        with pytest.raises(SymbolError) as err:
-            link.connect()
-        text = str(err.value)
-        assert '\n' not in text and 'symbols.position.type = REAL' in text
-        assert 'declares GVL_EHA.fPosition as LREAL' in text
-    finally:
-        link.close()
-        peer.stop()
+    text = connect_error(plant_params, tmp_path,
+                         lambda s: s['position'].update(type='REAL'))
+    assert 'symbols.position.type = REAL' in text
+    assert 'declares GVL_EHA.fPosition as LREAL' in text
 
 
 def test_silent_plc_is_a_link_error_not_a_hang(plant_params):

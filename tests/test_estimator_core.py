@@ -377,7 +377,7 @@ def _open_loop_model_error(params, structure):
         elif k > 1000:
             inputs = [0.5 * (w0 + tr.motor_speed[0]), -tr.friction_force]
             if structure == 'chambers':
-                F, G = kf.modes[2 * (kf.x[2] < kf.c.p_c) + (kf.x[3] < kf.c.p_c)]
+                F, G = kf.modes[kf.valve_mode()]
                 inputs.append(1.0)
             else:
                 F, G = kf.F, kf.G

@@ -147,6 +147,12 @@ class ChamberKF(MeasuredKF):
         self.x[3] = self.c.p_acc if p_b is None else p_b
         self.P = self.P0.copy()
 
+    def valve_mode(self) -> int:
+        """Index into :attr:`modes` of the check-valve state the prior pressures give:
+        2 s_A + s_B, a valve open below p_c."""
+        p_c = self.c.p_c
+        return 2 * int(self.x[2] < p_c) + int(self.x[3] < p_c)
+
     def predict(self, omega: float, p_D: float | None = None):
         """One Ts with the motor speed and the friction estimate of eq. 4.36 (from the
         measured p_D, or the filter's own, when friction_uses_pressure) held over the period;
@@ -155,8 +161,7 @@ class ChamberKF(MeasuredKF):
         pd = (self.x[2] - self.x[3]) if p_D is None else p_D
         self.u[1] = friction_estimate(omega, pd if self.friction_uses_pressure else None,
                                       self.c.A_p, self.c.D_p, self.F_s, self.v_eps)
-        p_c = self.c.p_c
-        self.mode = 2 * (self.x[2] < p_c) + (self.x[3] < p_c)
+        self.mode = self.valve_mode()
         self.F, self.G = self.modes[self.mode]
         kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
 
@@ -166,7 +171,3 @@ class ChamberKF(MeasuredKF):
     @property
     def pressure_diff(self) -> float:
         return float(self.x[2] - self.x[3])
-
-    @property
-    def leak_correction(self) -> float:
-        return 0.0
