@@ -7,7 +7,7 @@ from eha_ros.core.plant import linear
 from eha_ros.core.plant.parameters import PLANT_SCHEMA
 from eha_ros.core.qft import bounds as qb
 from eha_ros.core.params import ParamError
-from eha_ros.core.qft import family, freqresp, lti, prefilter, pso, verify
+from eha_ros.core.qft import cost, family, freqresp, lti, minimax, prefilter, pso, verify
 from eha_ros.core.qft.spec import QftSpec, default_spec, load_spec
 
 
@@ -84,6 +84,28 @@ def test_controller_realisation(setup):
         assert np.allclose(np.polyval(num, 1j * w) / np.polyval(den, 1j * w), G.freq(w), rtol=1e-8)
     G = lti.thesis_position()     # DC scaling of eq. 4.76 ~ 1.6e5 ("165200")
     assert abs(G.freq(1e-6) * 1e-6) == pytest.approx(1.614e5, rel=1e-3)
+
+
+def test_second_order_section_realisation():
+    """G of eq. 4.74 with a complex zero pair over a complex pole pair: the real cascade state
+    space, the YAML polynomials and their roots reproduce the factored response; the section
+    has unity DC gain, so K/s is untouched at low frequency."""
+    w = np.logspace(-3, 4, 60)
+    G = lti.position_controller(1e6, [190.0, 190.0, 0.5], [1500.0, 40.0, 1500.0],
+                                [(800.0, 0.5, 1350.0, 0.56)])
+    assert sum(isinstance(z, complex) for z in G.zeros) == 2 and len(G.poles) == 6
+    A, B, C, D = G.ss()
+    assert np.isrealobj(A) and A.shape == (6, 6)
+    h = freqresp.ss_freqresp(A, B[:, 0], C[0], w, D[0, 0])[0]
+    assert np.allclose(h, G.freq(w), rtol=1e-9)
+    G2 = lti.from_num_den(*G.num_den())
+    assert np.allclose(G2.freq(w), G.freq(w), rtol=1e-7)
+    assert abs(G.freq(1e-6) * 1e-6) == pytest.approx(1e6, rel=1e-5)
+    # the section alone has unity DC gain
+    S = lti.position_controller(1.0, [], [], [(800.0, 0.5, 1350.0, 0.56)])
+    assert abs(S.freq(1e-3) * 1e-3) == pytest.approx(1.0, rel=1e-6)
+    with pytest.raises(ValueError):
+        lti.Zpk((1 + 2j,), (-1.0, -2.0), 1.0)    # unpaired complex zero
 
 
 def _spec_values(spec, w, L, Pd_abs):
@@ -243,3 +265,36 @@ def test_step_metrics_and_filtered_steps():
     F = lti.thesis_prefilter()
     ys = prefilter.filtered_steps(F, np.ones((1, 400)), Ts)
     assert abs(ys[0, -1] - 1) < 1e-6 and ys[0, 0] < 0.5
+
+
+def test_minimax_refine_lowers_worst_excess(setup):
+    """The dense-grid minimax step: its Ws part is max|T| over the family (direct evaluation),
+    and a few SLSQP iterations from the thesis controller (eq. 4.76 in the eq. 4.74
+    parametrisation) lower the worst spec excess without losing closed-loop stability."""
+    _, spec, fam, casc = setup
+    dx = minimax.DenseExcess(casc, spec)
+    K = 2.668e9 * 447 * 153 * 0.61 / (2155 * 613 * 522)
+    x0 = np.log10([447.0, 153.0, 0.61, 2155.0, 613.0, 522.0])
+    G0 = cost.position_ctrl(x0, K)
+    assert np.allclose(G0.freq(dx.w), lti.thesis_position().freq(dx.w), rtol=1e-9)
+    L = casc.P_omega(dx.w) * G0.freq(dx.w)[None]
+    T = np.abs(L / (1 + L)).max(0)
+    assert np.allclose(dx.parts(G0)['Ws'], qb.db(T / spec['position.Ws']))
+    e0 = dx(G0).max()
+    assert dx.max_real(G0) < 0
+    lo, hi = np.full(6, np.log10(0.5)), np.full(6, np.log10(3000.0))
+    x, e = minimax.refine(lambda v: cost.position_ctrl(v, K), x0, lo, hi, dx, -0.25, maxiter=40)
+    assert e < e0 - 1.0, (e0, e)
+    assert dx.max_real(cost.position_ctrl(x, K)) <= -0.25
+
+
+def test_bound_margin_matches_violation(setup):
+    """margin_db (signed, used by the minimax step) equals violation_db where a bound is
+    violated and is <= 0 where it is met, for the thesis loop and the same loop 10 dB up."""
+    _, spec, fam, casc = setup
+    bs = qb.position_bounds(spec, casc.P_omega, casc.P_d)
+    for k in (1.0, 10 ** 0.5):
+        L0 = k * casc.P_omega(bs.w)[-1] * lti.thesis_position().freq(bs.w)
+        v, m = qb.violation_db(bs.merged, L0), qb.margin_db(bs.merged, L0)
+        assert np.allclose(m[v > 0], v[v > 0]) and np.all(m[v == 0] <= 1e-12)
+        assert np.any(v > 0) and np.any(m < 0)

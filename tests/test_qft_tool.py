@@ -64,9 +64,12 @@ def test_quick_design_end_to_end(tmp_path):
     assert 'iteration' in r.stderr                       # progress shown
     assert 'T_d = 2.5 ms' in r.stderr and 'plant.drive.Kp_w = ' in r.stdout
     Gv, G, F = report.read_controller_yaml(str(out))
-    assert len(G.poles) == 4 and 0.0 in G.poles and len(Gv.poles) == 2
-    # realisable at Ts: every zero/pole of G inside the PSO box [0.5, 1000] rad/s
-    assert all(0.5 * (1 - 1e-9) <= -v <= 1000 * (1 + 1e-9) for v in G.zeros + G.poles if v != 0)
+    # eq. 4.74 with 3 pairs plus one second-order section (config/qft_spec.yaml)
+    assert len(G.poles) == 6 and 0.0 in G.poles and len(G.zeros) == 5 and len(Gv.poles) == 2
+    # realisable at Ts: every zero/pole of G inside the box [0.5, 1500] rad/s (|.| for pairs)
+    assert all(0.5 * (1 - 1e-9) <= abs(v) <= 1500 * (1 + 1e-9) for v in G.zeros + G.poles if v != 0)
+    assert all(np.real(v) < 0 for v in G.zeros + G.poles if v != 0)
+    assert 'G minimax' in r.stderr                      # refinement progress shown
     # --update-plant-yaml: only the three drive lines change, comments/layout kept
     new = plant.read_text()
     diff = [(a, b) for a, b in zip(orig.split('\n'), new.split('\n')) if a != b]
@@ -81,29 +84,24 @@ def test_quick_design_end_to_end(tmp_path):
         assert (tmp_path / 'rep' / name).stat().st_size > 0
 
 
-# Known, reported gap (out/qft/full5/report.md): with the 2.5 ms loop delay, the eq. 4.74
-# structure, z_i, p_i in [0.5, 1000] rad/s and the eq. 3.22 leakage of the linear model, the
-# stiffness spec |P_d S| <= |M| (eq. 4.60) is missed at 10-50 rad/s on the leakiest plants
-# (3.3 dB on the dense grid, 3.8 dB at 50 rad/s); every other check passes. Upper limits on
-# the miss (dB) so that a regression still fails:
-STIFFNESS_GAP_DB = {'pos_stiffness': ('pos_stiff_worst_db', 3.6),
-                    'pos_bounds': ('pos_bound_violation_db', 4.0)}
-
-
-def test_shipped_design_meets_every_check():
-    """config/controller.yaml (committed design) on every plant: eigenvalues, dense-grid specs,
-    design-frequency bounds, nominal bandwidth >= 9 Hz, loop delay and the digital loop (every
-    check except the documented stiffness gap). No PSO rerun."""
+def _analyse(path):
     spec = load_spec(os.path.join(ROOT, 'config/qft_spec.yaml'))
     plant = load(PLANT_SCHEMA, [os.path.join(ROOT, 'config/plant.yaml')])
     fam = family.build_family(plant, spec)
-    Gv, G, F = report.read_controller_yaml(os.path.join(ROOT, 'config/controller.yaml'))
+    Gv, G, F = report.read_controller_yaml(os.path.join(ROOT, path))
     from eha_ros.tools.design_qft import analyse_set
-    r = analyse_set(fam, spec, Gv, G, F)[0]
-    failed = [k for k, v in r['pass'].items() if not v and k not in STIFFNESS_GAP_DB]
+    return analyse_set(fam, spec, Gv, G, F)[0], G
+
+
+def test_shipped_design_meets_every_check():
+    """config/controller_qft.yaml (scripts/design_qft --seed 3 with the shipped spec) on every
+    plant: eigenvalues, dense-grid specs, design-frequency bounds, nominal bandwidth >= 9 Hz,
+    loop delay and the digital loop: every check, including the dynamic stiffness of eq. 4.60
+    up to 7 Hz. No PSO rerun."""
+    r, G = _analyse('config/controller_qft.yaml')
+    failed = [k for k, v in r['pass'].items() if not v]
     assert not failed, (failed, {k: v for k, v in r.items() if not k.startswith('step_nominal_')})
-    for key, (fig, limit) in STIFFNESS_GAP_DB.items():
-        assert r[fig] <= limit, (key, r[fig])
+    assert r['all_pass'] and r['pos_stiff_worst_db'] <= 0.0 and r['pos_stiffness_min_N_per_mm'] >= 49e3
     assert r['bw_nominal_hz'] >= 9.0
     # the loop delay and the digital checks are part of the verdict
     assert r['loop_delay_ms'] == pytest.approx(2.5) and r['dig_delay_samples'] == 2
@@ -111,7 +109,50 @@ def test_shipped_design_meets_every_check():
         assert r['pass'][key]
     assert r['step_overshoot_pct'] <= 5.0 and r['step_settling_s'] <= 0.3
     # realisable at Ts = 1 ms: all controller corners below pi/(2 Ts)
-    assert max(-v for v in G.poles + G.zeros) <= 1000.0 * (1 + 1e-9)
+    assert max(abs(v) for v in G.poles + G.zeros) <= 1500.0 * (1 + 1e-9) < np.pi / (2 * 1e-3)
+
+
+# The stack's default controller (config/controller.yaml, eq. 4.74 only, corners <= 1000 rad/s,
+# K = 660800) misses the stiffness of eq. 4.60 at 10-50 rad/s on the leakiest plants (3.3 dB on
+# the dense grid, 3.8 dB at 50 rad/s); every other check passes. It stays the default because
+# the stiff design amplifies the position-estimate noise into the speed command (see
+# test_stiff_design_costs_steady_accuracy_on_the_nonlinear_stack). Upper limits on the miss (dB)
+# so that a regression still fails:
+STIFFNESS_GAP_DB = {'pos_stiffness': ('pos_stiff_worst_db', 3.6),
+                    'pos_bounds': ('pos_bound_violation_db', 4.0)}
+
+
+def test_stack_default_controller_checks_and_its_stiffness_gap():
+    r, G = _analyse('config/controller.yaml')
+    failed = [k for k, v in r['pass'].items() if not v and k not in STIFFNESS_GAP_DB]
+    assert not failed, (failed, {k: v for k, v in r.items() if not k.startswith('step_nominal_')})
+    for key, (fig, limit) in STIFFNESS_GAP_DB.items():
+        assert 0.0 < r[fig] <= limit, (key, r[fig])
+    assert r['bw_nominal_hz'] >= 9.0 and max(abs(v) for v in G.poles + G.zeros) <= 1000.0 * (1 + 1e-9)
+
+
+def test_stiff_design_costs_steady_accuracy_on_the_nonlinear_stack(tmp_path):
+    """Batch stack (nonlinear plant, sensor noise, chamber Kalman filter), 5 mm step, seeds 1-3:
+    the QFT design that meets eq. 4.60 turns the estimate noise into a speed command ~10x
+    noisier than the default controller, and the piston ends tens of um off target while the
+    estimate says it is there. Measured, so the README's statement stays true."""
+    import shutil
+    from eha_ros.core.batch import BatchStack
+    cfg = tmp_path / 'config'
+    shutil.copytree(os.path.join(ROOT, 'config'), cfg)
+    shutil.copy(cfg / 'controller_qft.yaml', cfg / 'controller.yaml')
+    res = {}
+    for name, d in (('default', os.path.join(ROOT, 'config')), ('stiff', str(cfg))):
+        err, noise = [], []
+        for seed in (1, 2, 3):
+            out = BatchStack(config_dir=d, seed=seed).run(np.r_[np.zeros(1000), np.full(1500, 0.005)])
+            x, u = out['truth'][1000:], out['command'][1000:]
+            err.append(abs(np.mean(x[1000:1400]) - 0.005))
+            noise.append(np.std(u[1000:1400]))
+        res[name] = (max(err), float(np.mean(noise)))
+    print('5 mm step, worst steady error [m] and command noise [rad/s]:', res)
+    assert res['default'][0] <= 20e-6 and res['stiff'][0] > 20e-6
+    assert res['stiff'][1] > 4 * res['default'][1]
 
 
 def test_drive_gains_equal_designed_velocity_controller():

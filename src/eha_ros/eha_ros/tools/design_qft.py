@@ -18,7 +18,7 @@ from ..core.cli import UsageError, guarded
 from ..core.params import load
 from ..core.plant.parameters import PLANT_SCHEMA
 from ..core.qft import bounds as qb
-from ..core.qft import cost, family, lti, plots, prefilter, pso, report, verify
+from ..core.qft import minimax, cost, family, lti, plots, prefilter, pso, report, verify
 from ..core.qft.spec import load_spec
 
 PROG = 'design_qft'
@@ -29,7 +29,8 @@ def parse(argv):
                                  'the controller YAML loaded by the controller node.')
     ap.add_argument('--spec', default='config/qft_spec.yaml', help='QFT specification (ROS params file, node design_qft)')
     ap.add_argument('--plant', default='config/plant.yaml', help='nominal plant parameters')
-    ap.add_argument('--out', default='config/controller.yaml', help='designed controller YAML')
+    ap.add_argument('--out', default='config/controller_qft.yaml',
+                    help='designed controller YAML (the stack runs config/controller.yaml; copy it there to use it)')
     ap.add_argument('--thesis-out', default=None,
                     help='thesis controllers (eqs. 4.71, 4.76, 4.77) YAML; default: '
                          'controller_thesis.yaml next to --out')
@@ -60,6 +61,16 @@ def progress(name, total):
 DRIVE_KEYS = (('Kp_w', '[Nm/(rad/s)] velocity loop P gain K_1 (times 1/k_T)', '0.45'),
               ('Ki_w', '[Nm/rad] velocity loop I gain K_2 (times 1/k_T)', '56'),
               ('lowpass_w', '[rad/s] velocity loop low-pass K_3', '2555'))
+
+
+def g_text(K, z, p, bq):
+    """One-line G(s) of eq. 4.74 (plus second-order sections) for logs and the YAML header."""
+    txt = (f'{K:g}/s prod (1 + s/z_i)/(1 + s/p_i), z = {[float(f"{v:.6g}") for v in z]}, '
+           f'p = {[float(f"{v:.6g}") for v in p]}')
+    for b in bq:
+        txt += (f' x (s^2/{b["wz"]:.6g}^2 + 2 {b["zeta_z"]:.4g} s/{b["wz"]:.6g} + 1)'
+                f'/(s^2/{b["wp"]:.6g}^2 + 2 {b["zeta_p"]:.4g} s/{b["wp"]:.6g} + 1)')
+    return txt
 
 
 def update_plant_yaml(path, K, when=''):
@@ -113,7 +124,7 @@ def main(argv=None):
         raise UsageError(f'cannot create output folder: {err}') from None
     t_start = time.time()
     fam = family.build_family(plant, spec)
-    log(f'{PROG}: family of {fam.n} plants, velocity design frequencies {list(spec.velocity_freqs)} rad/s')
+    log(f'{PROG}: family of {fam.n} plants, velocity design frequencies {[float(v) for v in spec.velocity_freqs]} rad/s')
     pp = dict(particles=spec['pso.particles'], W=spec['pso.W'], C1=spec['pso.C1'],
               C2=spec['pso.C2'], v_max_frac=spec['pso.v_max_frac'], seed=a.seed)
     it_v = 4 if a.quick else spec['velocity.iterations']
@@ -147,27 +158,54 @@ def main(argv=None):
     bp = qb.position_bounds(spec, casc.P_omega, casc.P_d)
     qb.check_feasible(bp, spec, 'position')
     pc = cost.PositionCost(casc, spec, bp)
-    lo_p = np.full(6, np.log10(spec['position.zp_min']))
-    hi_p = np.full(6, np.log10(spec['position.zp_max']))
-    rp = pso.pso(pc, lo_p, hi_p, iterations=it_p, progress=progress('G PSO', it_p), **pp)
-    pc.ws_margin_db = spec['pso.Ws_margin_db']      # polish stops short of the W_s edge
-    xpol, fpol = pso.polish(pc, rp.x, lo_p, hi_p, maxfev=40 if a.quick else 400)
-    pc.ws_margin_db = 0.0
-    log(f'{PROG}: Nelder-Mead polish of the PSO best (W_s - {spec["pso.Ws_margin_db"]:g} dB): '
-        f'cost {rp.cost:.4g} -> {fpol:.4g}')
-    summary['position_polish'] = {'pso_cost': rp.cost, 'polished_cost': fpol}
-    rp.x, rp.cost = xpol, fpol
-    G = cost.position_ctrl(rp.x, spec['position.K'])
+    lo_p, hi_p = cost.position_box(spec)
+    npair, nbq = spec['position.pairs'], spec['position.biquads']
+    # stage 1: the thesis' PSO over the z_i, p_i of eq. 4.74 (Table 4.8)
+    lo_1, hi_1 = lo_p[:2 * npair], hi_p[:2 * npair]
+    rp = pso.pso(pc, lo_1, hi_1, iterations=it_p, progress=progress('G PSO', it_p), **pp)
+    dx = minimax.DenseExcess(casc, spec, bp)
+
+    def ctrl(x):
+        return cost.position_ctrl(x, spec['position.K'], npair)
+
+    # stage 2: minimax on the dense grid, from the PSO best with each second-order section
+    # added as an identity (w_z = w_p, zeta_z = zeta_p) at a few start frequencies
+    e_pso = float(dx(ctrl(rp.x)).max())
+    starts = [rp.x]
+    if nbq:
+        starts = [np.clip(np.r_[rp.x, np.log10([v for k in range(nbq) for v in
+                                                (w0 * 1.5 ** k, 0.5, w0 * 1.5 ** k, 0.5)])],
+                          lo_p, hi_p) for w0 in (300.0, 600.0, 1000.0)]
+    log(f'{PROG}: minimax refinement of the PSO best on the {len(dx.w)}-point grid (SLSQP, '
+        f'{len(starts)} start(s){", second-order sections start as identities" if nbq else ""}) ...')
+    it_r = 10 if a.quick else 200
+    best = None
+    for x0 in starts:
+        xr, e_r = minimax.refine(ctrl, x0, lo_p, hi_p, dx, -0.5 * spec['position.zp_min'],
+                                 maxiter=it_r, progress=progress('G minimax', it_r))
+        if best is None or e_r < best[1]:
+            best = (xr, e_r)
+    xr, e_ref = best
+    log(f'{PROG}: worst spec excess on the family, dense grid: PSO best {e_pso:+.3f} dB -> '
+        f'refined {e_ref:+.3f} dB (<= 0 meets every spec)')
+    summary['position_refine'] = {'pso_cost': rp.cost, 'pso_worst_excess_db': e_pso,
+                                  'refined_worst_excess_db': e_ref,
+                                  'refined_cost': float(pc(xr[None])[0])}
+    rp.x = xr
+    G = ctrl(rp.x)
     zp = (10 ** rp.x).tolist()
-    summary['position'] = {'K': spec['position.K'], 'z': zp[:3], 'p': zp[3:], 'pso_cost': rp.cost}
-    log(f'{PROG}: G = {spec["position.K"]:g}/s prod(1+s/z)/(1+s/p), z = '
-        f'{[round(v, 4) for v in zp[:3]]}, p = {[round(v, 4) for v in zp[3:]]}, cost {rp.cost:.4g}')
+    bq = [dict(zip(('wz', 'zeta_z', 'wp', 'zeta_p'), zp[2 * npair + 4 * k: 2 * npair + 4 * k + 4]))
+          for k in range(nbq)]
+    summary['position'] = {'K': spec['position.K'], 'z': zp[:npair], 'p': zp[npair:2 * npair],
+                           'biquads': bq, 'pso_cost': rp.cost}
+    g_txt = g_text(spec['position.K'], zp[:npair], zp[npair:2 * npair], bq)
+    log(f'{PROG}: G = {g_txt}')
 
     if not a.no_crosscheck:
         log(f'{PROG}: cross-check with scipy differential_evolution (same costs)')
         mi = 3 if a.quick else 25
         xv, fv, nv = pso.de_crosscheck(vc, lo_v, hi_v, seed=a.seed, maxiter=mi, popsize=8)
-        xp, fp, npv = pso.de_crosscheck(pc, lo_p, hi_p, seed=a.seed, maxiter=mi, popsize=8)
+        xp, fp, npv = pso.de_crosscheck(pc, lo_1, hi_1, seed=a.seed, maxiter=mi, popsize=8)
         summary['crosscheck'] = {'velocity': {'pso_cost': rv.cost, 'de_cost': fv, 'de_nfev': nv,
                                               'de_x': (10 ** xv).tolist()},
                                  'position': {'pso_cost': rp.cost, 'de_cost': fp, 'de_nfev': npv,
@@ -205,8 +243,7 @@ def main(argv=None):
     header = (f'QFT design by scripts/design_qft: spec {a.spec}, plant {a.plant}, seed {a.seed}'
               f'{", QUICK (not a full design)" if a.quick else ""}, {dt.datetime.now().isoformat(timespec="seconds")}\n'
               f'G_v = (1/k_T)({K1:.6g} + {K2:.6g}/s)/(s/{K3:.6g} + 1), k_T = {fam.k_T_nominal}\n'
-              f'G = {spec["position.K"]:g}/s prod (1 + s/z_i)/(1 + s/p_i), z = {[float(f"{v:.6g}") for v in zp[:3]]}, '
-              f'p = {[float(f"{v:.6g}") for v in zp[3:]]}\n'
+              f'G = {g_txt}\n'
               f'F corners (a, b, c) = {[float(f"{v:.6g}") for v in finfo["corners"]]} rad/s\n'
               f'position-loop delay T_d = {1e3 * T_d:.4g} ms (1.5 Ts + plant.drive.delay), Ts = {spec["digital.Ts"]:g} s, '
               f'digital check: ZOH plant, {spec.delay_samples(fam.drive_delay)} delay samples, Tustin G and F\n'
@@ -238,6 +275,8 @@ def main(argv=None):
     plots.steps(os.path.join(rdir, 'step_digital.png'), {'designed': res_d, 'thesis': res_t}, spec)
     plots.convergence(os.path.join(rdir, 'pso_convergence.png'),
                       {'G_v (velocity)': rv.history, 'G (position)': rp.history})
+    box_bq = (f'; second-order sections: w in the same box, zeta in [{spec["position.zeta_min"]:g}, '
+              f'{spec["position.zeta_max"]:g}]' if spec['position.biquads'] else '')
     md = ['# QFT design report', '', '```', header, '```', '',
           f'Family: {fam.n} plants (Table 4.5 grid), nominal = plant.yaml x {spec["family.nominal_scale"]}.',
           'Velocity loop designed on omega/i_ref (speed output of eq. 3.35; the thesis writes P_i in 4.52).',
@@ -250,7 +289,9 @@ def main(argv=None):
           f'a 4th-order Pade cascade. Digital rows: each closed velocity loop ZOH-discretised at Ts = '
           f'{spec["digital.Ts"]:g} s, {spec.delay_samples(fam.drive_delay)} shift states, G and F by Tustin '
           f'(controller/discrete.py, prewarp {spec["digital.prewarp_w"] or "none"}), step {1e3 * spec["digital.step"]:g} mm.',
-          f'PSO box of z_i, p_i: [{spec["position.zp_min"]:g}, {spec["position.zp_max"]:g}] rad/s.',
+          f'PSO box of z_i, p_i: [{spec["position.zp_min"]:g}, {spec["position.zp_max"]:g}] rad/s{box_bq}. '
+          f'The PSO best is refined by SLSQP minimax of the worst spec excess on the dense grid '
+          f'({summary["position_refine"]["pso_worst_excess_db"]:+.3f} dB -> {summary["position_refine"]["refined_worst_excess_db"]:+.3f} dB).',
           f'Simulated drive: {drive_msg}{" (written to " + a.plant + ")" if a.update_plant_yaml else ""}.', '',
           report.markdown({'designed': res_d, 'thesis (4.71/4.76/4.77)': res_t}), '',
           f'Phase grid {spec["bounds.phase_step_deg"]} deg: worst bound change between adjacent phases (dB) = '

@@ -314,3 +314,17 @@ def violation_db(b: Bound, L0: np.ndarray) -> np.ndarray:
         inside = (m > db(fl)) & (m < db(fh))
         v = v + np.where(inside, np.minimum(m - db(fl), db(fh) - m), 0.0)
     return np.nan_to_num(v, nan=0.0)
+
+
+def margin_db(b: Bound, L0: np.ndarray) -> np.ndarray:
+    """Signed distance of L0 to its bound at each design frequency in dB: > 0 violation (as
+    violation_db), < 0 slack to the nearest bound edge; -100 where no bound applies."""
+    lo, fl, fh = lookup(b, L0)
+    m = db(np.abs(L0))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        low = np.where(lo > 0, np.where(np.isinf(lo), 1e3, db(lo) - m), -100.0)
+        d_lo, d_hi = m - db(fl), db(fh) - m
+        inside = (d_lo > 0) & (d_hi > 0)
+        fb = np.where(inside, np.minimum(d_lo, d_hi), -np.minimum(np.abs(d_lo), np.abs(d_hi)))
+        fb = np.where(np.isnan(fl), -100.0, fb)
+    return np.maximum(low, fb)

@@ -13,10 +13,10 @@ from .lti import Zpk, position_controller, velocity_controller
 W_DENSE = np.logspace(-2, np.log10(3000.0), 240)
 
 
-def _Ws_excess_db(L, Ws, margin_db=0.0):
-    """Eq. 4.70 over the family: max_r,w |L/(1+L)| in dB above W_s - margin (>= 0); L (P, N, F)."""
+def _Ws_excess_db(L, Ws):
+    """Eq. 4.70 over the family: max_r,w |L/(1+L)| in dB above W_s (>= 0); L (P, N, F)."""
     T = np.abs(L / (1 + L)).max(axis=(1, 2))
-    return np.maximum(0.0, qb.db(T) - qb.db(Ws) + margin_db)
+    return np.maximum(0.0, qb.db(T) - qb.db(Ws))
 
 
 def _eig_penalty(A_batch, weight):
@@ -30,9 +30,23 @@ def velocity_ctrl(x, k_T):
     return velocity_controller(K1, K2, K3, k_T)
 
 
-def position_ctrl(x, K):
+def position_ctrl(x, K, pairs=3):
+    """G of eq. 4.74 from x = log10 [z_1..z_n, p_1..p_n, (wz, zeta_z, wp, zeta_p) per
+    second-order section]; n = pairs."""
     v = 10 ** np.asarray(x, float)
-    return position_controller(K, v[:3], v[3:])
+    bq = v[2 * pairs:].reshape(-1, 4)
+    return position_controller(K, v[:pairs], v[pairs:2 * pairs], [tuple(b) for b in bq])
+
+
+def position_box(spec):
+    """(lo, hi) of the log10 position parameters: z_i, p_i in [zp_min, zp_max]; each
+    second-order section's wz, wp in the same range and zeta_z, zeta_p in [zeta_min, zeta_max]."""
+    n, m = spec['position.pairs'], spec['position.biquads']
+    zp = np.log10([spec['position.zp_min'], spec['position.zp_max']])
+    ze = np.log10([spec['position.zeta_min'], spec['position.zeta_max']])
+    lo = np.r_[np.full(2 * n, zp[0]), np.tile([zp[0], ze[0], zp[0], ze[0]], m)]
+    hi = np.r_[np.full(2 * n, zp[1]), np.tile([zp[1], ze[1], zp[1], ze[1]], m)]
+    return lo, hi
 
 
 def drop_state(A, idx):
@@ -92,12 +106,12 @@ class PositionCost:
         ew = np.asarray(spec['position.effort_freqs'], float)
         self.effort = np.isin(np.round(bset.w, 9), np.round(ew, 9))
         self.K = spec['position.K']
-        self.ws_margin_db = 0.0        # the local polish aims at W_s - pso.Ws_margin_db
+        self.pairs = spec['position.pairs']
         # closed-loop eigenvalues with a Pade approximant of the loop delay
         self.Ae, self.Be, self.Cx = casc.delayed_ss()
 
     def controllers(self, X):
-        return [position_ctrl(x, self.K) for x in np.atleast_2d(X)]
+        return [position_ctrl(x, self.K, self.pairs) for x in np.atleast_2d(X)]
 
     def __call__(self, X, detail=False):
         X = np.atleast_2d(X)
@@ -107,8 +121,7 @@ class PositionCost:
         viol = qb.violation_db(self.b.merged, L0)
         soft = np.where(self.effort, qb.db(np.abs(L0)), 0.0)
         Gdense = np.array([c.freq(W_DENSE) for c in ctrls])
-        js = _Ws_excess_db(self.Pd[None] * Gdense[:, None, :], self.spec['position.Ws'],
-                           self.ws_margin_db)
+        js = _Ws_excess_db(self.Pd[None] * Gdense[:, None, :], self.spec['position.Ws'])
         Acl = np.concatenate([feedback(self.Ae, self.Be, self.Cx, c.ss())[0][None]
                               for c in ctrls])
         pen, mr = _eig_penalty(Acl.reshape(-1, *Acl.shape[2:]), self.spec['pso.stability_penalty'])

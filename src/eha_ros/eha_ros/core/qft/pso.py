@@ -63,22 +63,3 @@ def de_crosscheck(cost, lo, hi, seed=0, maxiter=30, popsize=10):
                                list(zip(lo, hi)), seed=seed, maxiter=maxiter, popsize=popsize,
                                polish=False, vectorized=True, updating='deferred', tol=0.0)
     return np.asarray(r.x), float(r.fun), int(r.nfev)
-
-
-def polish(cost, x0, lo, hi, maxfev=400):
-    """Bounded Nelder-Mead refinement of the PSO best (clipped to the box, linear penalty
-    outside); returns (x, cost) and never a worse point than x0."""
-    from scipy.optimize import minimize
-    lo = np.asarray(lo, float)
-    hi = np.asarray(hi, float)
-
-    def f(x):
-        return float(np.asarray(cost(np.clip(x, lo, hi)[None]), float)[0]) + \
-            100.0 * float(np.sum(np.maximum(0.0, x - hi) + np.maximum(0.0, lo - x)))
-
-    f0 = f(np.asarray(x0, float))
-    r = minimize(f, np.asarray(x0, float), method='Nelder-Mead',
-                 options=dict(maxfev=maxfev, xatol=1e-4, fatol=1e-4))
-    x = np.clip(r.x, lo, hi)
-    fx = f(x)
-    return (x, fx) if fx < f0 else (np.asarray(x0, float), f0)

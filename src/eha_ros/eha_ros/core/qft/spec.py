@@ -60,6 +60,14 @@ QFT_SPEC_SCHEMA = Schema('design_qft', [
           doc='PSO range of z_i, p_i; 0.5 rad/s keeps closed-loop tails below ~2 s'),
     Param('position.zp_max', 'float', 'rad/s', 1000.0, 1e-6, 1e7,
           doc='PSO range of z_i, p_i; must be <= pi/(2 digital.Ts) (realisable at Ts)'),
+    Param('position.pairs', 'int', '', 3, 1, 10, doc='zero/pole pairs of eq. 4.74 (thesis: 3)'),
+    Param('position.biquads', 'int', '', 0, 0, 4,
+          doc='extra second-order sections (s^2/wz^2 + 2 zeta_z s/wz + 1)/(s^2/wp^2 + 2 zeta_p '
+              's/wp + 1) in G (choice beyond eq. 4.74; thesis: 0)'),
+    Param('position.zeta_min', 'float', '', 0.5, 0.01, 10.0,
+          doc='range of the sections\' damping ratios; >= 0.5 keeps the controller free of '
+              'resonant poles (a second loop crossover)'),
+    Param('position.zeta_max', 'float', '', 1.0, 0.01, 10.0),
     Param('position.effort_freqs', 'float[]', 'rad/s', [100.0, 500.0], 1e-6, 1e6,
           doc='eq. 4.75 soft control-effort frequencies (k..l)'),
     Param('position.m1', 'float', '', 1.0, 0.0, 1e9, doc='hard-constraint weight, eq. 4.75'),
@@ -75,9 +83,6 @@ QFT_SPEC_SCHEMA = Schema('design_qft', [
     Param('pso.stability_penalty', 'float', '', 1000.0, 0.0, 1e12,
           doc='added when any family member has a closed-loop eigenvalue with Re >= 0'),
     Param('pso.Ws_weight', 'float', '', 10.0, 0.0, 1e9, doc='eq. 4.70 weight per dB over W_s'),
-    Param('pso.Ws_margin_db', 'float', 'dB', 0.05, 0.0, 3.0,
-          doc='local polish of the position PSO best aims at W_s - margin (its 240-point grid), '
-              'so the polished optimum still meets W_s on the 400-point verification grid'),
     # prefilter, eq. 4.61, 4.77
     Param('prefilter.w_max', 'float', 'rad/s', 50.0, 1e-3, 1e6,
           doc='tracking band checked on a dense grid from min(track_freqs) to this'),
@@ -104,7 +109,8 @@ QFT_SPEC_SCHEMA = Schema('design_qft', [
           doc='allowed |discrete - continuous-with-delay| of PM (nominal)'),
     # verification
     Param('verify.w_min', 'float', 'rad/s', 0.01, 1e-6, 1e6),
-    Param('verify.w_max', 'float', 'rad/s', 1000.0, 1e-6, 1e7),
+    Param('verify.w_max', 'float', 'rad/s', 3000.0, 1e-6, 1e7,
+          doc='top of the dense grid; 3000 rad/s is just below pi/Ts at 1 kHz'),
     Param('verify.n_points', 'int', '', 400, 10, 100000),
     Param('verify.band_max_hz', 'float', 'Hz', 7.0, 1e-3, 1e4,
           doc='sensitivity and stiffness checked up to this frequency'),
@@ -191,6 +197,9 @@ def load_spec(path: str) -> QftSpec:
         raise ParamError(f'{path}: position.zp_max = {vals["position.zp_max"]!r}: expected <= '
                          f'pi/(2 digital.Ts) = {nyq2:.6g} rad/s (not realisable at Ts = '
                          f'{vals["digital.Ts"]:g} s)')
+    if vals['position.zeta_min'] >= vals['position.zeta_max']:
+        raise ParamError(f'{path}: position.zeta_min = {vals["position.zeta_min"]!r}: expected < '
+                         f'position.zeta_max')
     if vals['verify.w_min'] >= vals['verify.w_max']:
         raise ParamError(f'{path}: verify.w_min = {vals["verify.w_min"]!r}: expected < verify.w_max')
     return QftSpec(vals)
