@@ -58,7 +58,6 @@ class HydroMech:
     C_eq: float
     D_p: float
     leak_factor: float = 2.0
-    stiff_factor: float = 2.0
 
 
 def continuous(h: HydroMech, gm_corner_hz: float | None = None):
@@ -69,13 +68,13 @@ def continuous(h: HydroMech, gm_corner_hz: float | None = None):
     A[0, 1] = 1.0
     A[1, 1] = -h.b / h.m_p
     A[1, 2] = h.A_p / h.m_p
-    A[2, 1] = -h.stiff_factor * h.A_p * h.beta / h.V_d
+    A[2, 1] = -2.0 * h.A_p * h.beta / h.V_d
     A[2, 2] = -h.leak_factor * h.C_eq * h.beta / h.V_d
     if gm_corner_hz is not None:
         A[3, 3] = -2.0 * math.pi * gm_corner_hz
     B = np.zeros((n, 2))
     B[1, 1] = 1.0 / h.m_p
-    B[2, 0] = h.stiff_factor * h.D_p * h.beta / h.V_d
+    B[2, 0] = 2.0 * h.D_p * h.beta / h.V_d
     return A, B
 
 
@@ -208,7 +207,7 @@ class ModelKF(MeasuredKF):
         self.i_leak = None
         if q_leak is not None:
             Bl = np.zeros((A.shape[0], 1))
-            Bl[2, 0] = -h.stiff_factor * h.beta / h.V_d * LEAK_UNIT
+            Bl[2, 0] = -2.0 * h.beta / h.V_d * LEAK_UNIT
             self._g_leak = zoh(A, Bl, Ts)[1][:, 0]     # ZOH column of a unit correction
             self.i_leak = len(q)
             q.append(q_leak)

@@ -57,7 +57,8 @@ class Zpk:
     def __post_init__(self):
         if len(self.zeros) > len(self.poles):
             raise ValueError('improper transfer function')
-        _split(self.zeros), _split(self.poles)
+        _split(self.zeros)                  # complex roots must come in conjugate pairs
+        _split(self.poles)
 
     def freq(self, w) -> np.ndarray:
         """G(j w) for angular frequencies w (rad/s), any shape."""

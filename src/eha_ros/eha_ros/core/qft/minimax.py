@@ -17,21 +17,16 @@ from scipy.optimize import minimize
 from . import bounds as qb
 from .family import CascadePlants
 from .freqresp import feedback, max_real_eig
-
-
-def verify_grid(spec) -> np.ndarray:
-    return np.logspace(np.log10(spec['verify.w_min']), np.log10(spec['verify.w_max']),
-                       spec['verify.n_points'])
+from .verify import dense_grid
 
 
 class DenseExcess:
     """Worst excess over the family, in dB, of each position-loop spec per grid frequency."""
 
     def __init__(self, casc: CascadePlants, spec, bset: qb.BoundSet | None = None):
-        self.spec = spec
         self.b = bset
         self.P0b = None if bset is None else casc.P_omega(bset.w)[-1]
-        w = verify_grid(spec)
+        w = dense_grid(spec)
         band = 2 * np.pi * spec['verify.band_max_hz']
         self.w = w
         self.st = w <= max(band, max(spec['position.stiff_freqs']))

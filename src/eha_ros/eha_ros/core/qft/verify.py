@@ -113,11 +113,16 @@ def margins(L, w):
     return gm, pm
 
 
+def dense_grid(spec) -> np.ndarray:
+    """The verification grid: verify.n_points log-spaced over verify.w_min..w_max (rad/s)."""
+    return np.logspace(np.log10(spec['verify.w_min']), np.log10(spec['verify.w_max']),
+                       spec['verify.n_points'])
+
+
 def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
     """All figures of the report for one controller set; values in SI/dB/deg/Hz."""
     r = {}
-    wd = np.logspace(np.log10(spec['verify.w_min']), np.log10(spec['verify.w_max']),
-                     spec['verify.n_points'])
+    wd = dense_grid(spec)
     # velocity loop
     A, B, _ = fam.all_A()
     Cw = np.broadcast_to(C_row(1, A.shape[1]), A.shape[:2])
