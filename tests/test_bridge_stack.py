@@ -9,6 +9,7 @@ import threading
 import numpy as np
 import pytest
 
+from eha_ros.core import recording
 from eha_ros.stack import Stack, node_command
 from ros_util import ROOT, start_process, stop_process, wait_for
 from test_bridge_core import free_port
@@ -73,18 +74,23 @@ def run_case(plant, tmp, ros_node):
         assert wait_for(lambda: lines and 'serving' in lines[0], 60), lines
         extra = {plant: ['-p', f'hardware_bridge:ads.tcp_port:={port}',
                          '-p', 'hardware_bridge:bridge.startup_discovery:=0.5']}
-    st = Stack([plant, 'estimator', 'controller'], lockstep=True, extra=extra).start()
+    rec = str(tmp / f'{plant}.mcap')        # lock-step + recording: tick 0 waits for it
+    st = Stack([plant, 'estimator', 'controller'], lockstep=True, extra=extra, record=rec).start()
     try:
         if peer is not None:
             arm_bridge(ros_node)
         step = step_figures(run_sweep(tmp, f'{plant}_step', STEP))
         summary = json.load(open(run_sweep(tmp, f'{plant}_sweep', SWEEP) / 'summary.json'))
     finally:
-        for name, (code, err) in st.stop().items():
+        res = st.stop()
+        for name, (code, err) in res.items():
             assert 'Traceback' not in err, (name, err)
         if peer is not None:
             code, out, err = stop_process(peer)
             assert 'Traceback' not in err, err
+    assert 'lock-step start: recorder subscribed to every /eha/* topic' in res[plant][1]
+    for topic, records in recording.read(rec, ['/eha/state', '/eha/command']).items():
+        assert records[0][1].seq <= 1, (plant, topic, records[0][1].seq)
     return step, summary
 
 

@@ -238,6 +238,49 @@ def test_lockstep_steps_only_on_command(ros_node):
         stop_process(proc)
 
 
+def test_lockstep_start_waits_for_named_subscribers(ros_node):
+    """sim_node.lockstep_start_after (what run_stack --record sets for the recorder): tick 0
+    is held until the named node subscribes to every /eha topic with a publisher."""
+    from eha_msgs.msg import ActuatorCommand, ActuatorState, PlantTruth
+    me = ros_node.get_name()
+    proc = start_process(plant_cmd('-p', 'sim_node.lockstep:=true', '-r', '__ns:=/lg',
+                                   '-p', f'sim_node.lockstep_start_after:=[{me}]'))
+    try:
+        states = []
+        ros_node.create_subscription(ActuatorState, '/lg/eha/state', states.append, 100)
+        pub = ros_node.create_publisher(ActuatorCommand, '/lg/eha/command', 10)
+        assert wait_for(lambda: len(states) >= 1, 60)
+        wait_matched(pub)
+        pub.publish(ActuatorCommand(seq=0, motor_speed_ref=10.0))
+        time.sleep(1.5)          # we do not subscribe to eha/sim/truth or eha/command yet: held
+        assert max(s.seq for s in states) == 0
+        ros_node.create_subscription(PlantTruth, '/lg/eha/sim/truth', lambda m: None, 10)
+        ros_node.create_subscription(ActuatorCommand, '/lg/eha/command', lambda m: None, 10)
+        assert wait_for(lambda: states[-1].seq == 1, 20), 'tick 0 still held'
+    finally:
+        _, _, err = stop_process(proc)
+    assert f'lock-step start: {me} subscribed to every /lg/eha/* topic; stepping' in err, err
+
+
+def test_lockstep_start_gives_up_after_its_timeout(ros_node):
+    from eha_msgs.msg import ActuatorCommand, ActuatorState
+    proc = start_process(plant_cmd('-p', 'sim_node.lockstep:=true', '-r', '__ns:=/lt',
+                                   '-p', 'sim_node.lockstep_start_after:=[nobody]',
+                                   '-p', 'sim_node.lockstep_start_timeout:=1.0'))
+    try:
+        states = []
+        ros_node.create_subscription(ActuatorState, '/lt/eha/state', states.append, 100)
+        pub = ros_node.create_publisher(ActuatorCommand, '/lt/eha/command', 10)
+        assert wait_for(lambda: len(states) >= 1, 60)
+        wait_matched(pub)
+        pub.publish(ActuatorCommand(seq=0, motor_speed_ref=10.0))
+        assert wait_for(lambda: states[-1].seq == 1, 20), 'tick 0 held beyond the timeout'
+    finally:
+        _, _, err = stop_process(proc)
+    assert 'lock-step start: still missing after 1 s: nobody on /lt/eha/' in err, err
+    assert 'stepping anyway' in err
+
+
 def test_bad_params_file_stops_node_with_one_line(tmp_path):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('plant_sim:\n  ros__parameters:\n    sim_node:\n      seed: -4\n')

@@ -17,6 +17,10 @@ from .core.params import default_config_dir
 # plant-side nodes: their own lock-step switch (they publish /clock); the others use sim time
 LOCKSTEP_PARAM = {'plant_sim': 'plant_sim:sim_node.lockstep:=true',
                   'hardware_bridge': 'hardware_bridge:bridge.lockstep:=true'}
+# lock-step with a recording: the plant side holds tick 0 until the recorder has subscribed
+START_AFTER_RECORDER = {'plant_sim': 'plant_sim:sim_node.lockstep_start_after:=[recorder]',
+                        'hardware_bridge':
+                            'hardware_bridge:bridge.lockstep_start_after:=[recorder]'}
 
 
 def cpu_seconds(pid: int) -> float:
@@ -82,6 +86,8 @@ class Stack:
                 self.extra.setdefault(name, [])
                 self.extra[name] += (['-p', LOCKSTEP_PARAM[name]] if name in LOCKSTEP_PARAM
                                      else ['-p', 'use_sim_time:=true'])
+                if record and name in START_AFTER_RECORDER:
+                    self.extra[name] += ['-p', START_AFTER_RECORDER[name]]
         if record:
             self.extra.setdefault('recorder', [])
             self.extra['recorder'] += ['-p', f'recorder:recorder.output:={record}']

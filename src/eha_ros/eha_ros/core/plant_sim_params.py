@@ -9,7 +9,12 @@ NODE = Schema('plant_sim', [
     Param('sim_node.lockstep', 'bool', '', False,
           doc='step only when the command of the previous state arrived; publish /clock'),
     Param('sim_node.lockstep_timeout', 'float', 's', 1.0, 1e-3, 60.0,
-          doc='lock-step: step anyway (and count a missed command) after this wall time'),
+          doc='lock-step: re-publish state(k) after this wall time without command(k)'),
+    Param('sim_node.lockstep_start_after', 'str[]', '', [''], min_len=1,
+          doc='lock-step: hold tick 0 until these nodes subscribe to every /eha topic with a '
+              'publisher (run_stack --record adds the recorder); empty string = none'),
+    Param('sim_node.lockstep_start_timeout', 'float', 's', 30.0, 0.0, 600.0,
+          doc='lock-step: step anyway (with a warning) after this wall time at tick 0'),
     Param('sim_node.initial_position', 'float', 'm', 0.0, -0.06, 0.06),
     Param('sim_node.command_timeout', 'float', 's', 0.05, 1e-3, 10.0,
           doc='no command for this long: speed reference goes to zero and is reported'),

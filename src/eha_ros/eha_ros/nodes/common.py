@@ -168,3 +168,45 @@ def publish_counted(node, pub, msg, what: str) -> None:
     except Exception as err:
         node.c.bump('publish_errors')
         node.get_logger().error(f'publishing {what} failed: {err}', throttle_duration_sec=1.0)
+
+
+class StartGate:
+    """Lock-step start: tick 0 is held until every node named in ``names`` subscribes to every
+    topic under ``prefix`` that has a publisher (a recorder, so a recording starts at tick 0
+    and two runs record the same ticks), seen on two polls in a row, or until ``timeout`` s
+    of wall time after start-up (then a warning names what was missing)."""
+
+    def __init__(self, node, names, prefix: str, timeout: float):
+        self.node, self.prefix = node, prefix
+        self.names = [n for n in names if n]
+        self.deadline = time.monotonic() + timeout
+        self.timeout = timeout
+        self.open = not self.names
+        self.seen = 0                     # polls in a row that found nothing missing
+
+    def missing(self) -> list[str]:
+        n = self.node
+        out = []
+        for topic, _ in n.get_topic_names_and_types():
+            if not topic.startswith(self.prefix) or not n.count_publishers(topic):
+                continue
+            subs = {i.node_name for i in n.get_subscriptions_info_by_topic(topic)}
+            out += [f'{name} on {topic}' for name in self.names if name not in subs]
+        return out
+
+    def poll(self) -> bool:
+        """True once open (call it while the loop is ready to step)."""
+        if self.open:
+            return True
+        missing = self.missing()
+        self.seen = 0 if missing else self.seen + 1
+        if self.seen >= 2:
+            self.open = True
+            self.node.get_logger().info(f'lock-step start: {", ".join(self.names)} subscribed '
+                                        f'to every {self.prefix}* topic; stepping')
+        elif time.monotonic() > self.deadline:
+            self.open = True
+            self.node.get_logger().warning(
+                f'lock-step start: still missing after {self.timeout:g} s: '
+                f'{", ".join(missing[:6])}; stepping anyway')
+        return self.open

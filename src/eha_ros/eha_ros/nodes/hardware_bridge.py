@@ -24,8 +24,8 @@ from ..core.cli import UsageError
 from ..core.params import default_config_dir
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import (channel_ok, declare_and_validate, latched_qos, node_base, publish_counted,
-                     run, stream_qos)
+from .common import (StartGate, channel_ok, declare_and_validate, latched_qos, node_base,
+                     publish_counted, run, stream_qos)
 
 
 def state_publishers(node, topic: str) -> list[str]:
@@ -86,6 +86,9 @@ def make_node(params: dict):
             self.pub_state = self.create_publisher(ActuatorState, 'eha/state', qos)
             self.pub_diag = diag.publisher(self)
             self.pub_clock = self.create_publisher(Clock, '/clock', 10) if self.lockstep else None
+            self.start_gate = StartGate(self, p['bridge.lockstep_start_after'],
+                                        self.state_topic.rsplit('/', 1)[0] + '/',
+                                        p['bridge.lockstep_start_timeout'])
             self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
             self.create_subscription(ChannelSelect, 'eha/channel_select', self.on_select,
                                      latched_qos())
@@ -263,6 +266,8 @@ def make_node(params: dict):
                 self.go.clear()
                 with self.lock:
                     due = self.go_seq == self.k       # a late duplicate of an older command: no
+                while due and self.k == 0 and self.running and not self.start_gate.poll():
+                    time.sleep(0.02)              # StartGate: the first cycle waits for it
                 if self.running and due:
                     self.cycle(self.Ts)
 

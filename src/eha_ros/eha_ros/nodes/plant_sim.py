@@ -16,8 +16,8 @@ from ..core.plant import EhaPlant
 from ..core.plant_sim_params import SCHEMA
 from ..core.stats import Counters, Histogram, RingStats
 from . import diag
-from .common import (channel_ok, declare_and_validate, latched_qos, node_base, publish_counted,
-                     run, stream_qos)
+from .common import (StartGate, channel_ok, declare_and_validate, latched_qos, node_base,
+                     publish_counted, run, stream_qos)
 
 
 class CommandGate:
@@ -96,6 +96,12 @@ def make_node(params: dict):
             if self.lockstep:
                 self.last_publish = time.monotonic()
                 self.create_timer(0.01, self.lockstep_watchdog)
+                self.start_gate = StartGate(
+                    self, self.p['sim_node.lockstep_start_after'],
+                    self.pub_state.topic_name.rsplit('/', 1)[0] + '/',
+                    self.p['sim_node.lockstep_start_timeout'])
+                if not self.start_gate.open:
+                    self.start_timer = self.create_timer(0.02, self.poll_start)
                 self.thread = None
             else:
                 # start the loop once the executor spins, so start-up is not counted as overruns
@@ -116,7 +122,14 @@ def make_node(params: dict):
             if msg.seq == self.k and self.gate.cmd_seq != self.k and self.state_time:
                 self.latency.add(time.perf_counter() - self.state_time)
             self.gate.command(msg.motor_speed_ref, msg.seq, time.monotonic())
-            if self.lockstep and msg.seq == self.k:
+            if self.lockstep and msg.seq == self.k and self.start_gate.open:
+                self.tick()
+
+        def poll_start(self):
+            """Lock-step, tick 0 held (StartGate): polled once command(0) is in (the loop's
+            topics all exist then); steps when it opens."""
+            if self.gate.cmd_seq == 0 and self.start_gate.poll():
+                self.start_timer.cancel()
                 self.tick()
 
         def on_load(self, msg):
