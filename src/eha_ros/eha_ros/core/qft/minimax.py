@@ -17,7 +17,7 @@ from scipy.optimize import minimize
 from . import bounds as qb
 from .family import CascadePlants
 from .freqresp import feedback, max_real_eig
-from .verify import dense_grid
+from .verify import dense_grid, family_worst
 
 
 class DenseExcess:
@@ -41,14 +41,12 @@ class DenseExcess:
         self.Ae, self.Be, self.Cx = casc.delayed_ss()
 
     def parts(self, G) -> dict:
-        L = self.Pw * G.freq(self.w)[None]
-        S = 1 / (1 + L)
-        T = np.abs(L * S)
+        f = family_worst(self.Pw, self.Pd, G.freq(self.w))
         out = {
-            'Ws': qb.db(T.max(0) / self.Ws),
-            'stiffness': qb.db((np.abs(self.Pd * S) / self.M[None]).max(0))[self.st],
-            'sensitivity': qb.db((np.abs(S) / self.Sspec[None]).max(0))[self.se],
-            'tracking': (qb.db(T.max(0) / T.min(0)) - self.allowed)[self.tr],
+            'Ws': qb.db(f['T_max'] / self.Ws),
+            'stiffness': qb.db(f['PdS_max'] / self.M)[self.st],
+            'sensitivity': qb.db(f['S_max'] / self.Sspec)[self.se],
+            'tracking': (qb.db(f['T_max'] / f['T_min']) - self.allowed)[self.tr],
         }
         if self.b is not None:
             out['bounds'] = qb.margin_db(self.b.merged, self.P0b * G.freq(self.b.w))

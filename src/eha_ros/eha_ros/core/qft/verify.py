@@ -119,6 +119,16 @@ def dense_grid(spec) -> np.ndarray:
                        spec['verify.n_points'])
 
 
+def family_worst(Pw, Pd, Gw) -> dict:
+    """Per frequency, over the family (rows of P_omega, P_d): max|T|, min|T|, max|S| and
+    max|P_d S| of the position loop L = P_omega G (eqs. 4.51, 4.57, 4.59, 4.61)."""
+    L = Pw * Gw[None]
+    S = 1 / (1 + L)
+    T = np.abs(L * S)
+    return {'T_max': T.max(0), 'T_min': T.min(0), 'S_max': np.abs(S).max(0),
+            'PdS_max': np.abs(Pd * S).max(0)}
+
+
 def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
     """All figures of the report for one controller set; values in SI/dB/deg/Hz."""
     r = {}
@@ -147,17 +157,15 @@ def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
     Ae, Be, Cx = casc.delayed_ss()
     Ap = feedback(Ae, Be, Cx, G.ss())[0]
     r['pos_max_real_eig'] = float(max_real_eig(Ap).max())
-    Pw, Pd = casc.P_omega(wd), casc.P_d(wd)
+    Pw = casc.P_omega(wd)
     L = Pw * G.freq(wd)[None]
-    T = L / (1 + L)
-    S = 1 / (1 + L)
-    r['pos_max_T_db'] = float(qb.db(np.abs(T).max()))
+    worst = family_worst(Pw, casc.P_d(wd), G.freq(wd))
+    r['pos_max_T_db'] = float(qb.db(worst['T_max'].max()))
     r['pos_Ws_db'] = float(qb.db(spec['position.Ws']))
     band = wd <= 2 * np.pi * spec['verify.band_max_hz']
-    r['pos_sens_worst_db'] = float(qb.db((np.abs(S[:, band]) / np.abs(spec.S_p(wd[band]))).max()))
-    r['pos_stiff_worst_db'] = float(qb.db((np.abs(Pd[:, band] * S[:, band]) /
-                                           np.abs(spec.M(wd[band]))).max()))
-    r['pos_stiffness_min_N_per_mm'] = float(1e-3 / np.abs(Pd[:, band] * S[:, band]).max())
+    r['pos_sens_worst_db'] = float(qb.db((worst['S_max'] / np.abs(spec.S_p(wd)))[band].max()))
+    r['pos_stiff_worst_db'] = float(qb.db((worst['PdS_max'] / np.abs(spec.M(wd)))[band].max()))
+    r['pos_stiffness_min_N_per_mm'] = float(1e-3 / worst['PdS_max'][band].max())
     gm, pm = margins(L, wd)
     r['pos_gm_min_db'], r['pos_pm_min_deg'] = float(gm.min()), float(pm.min())
     wt = band_grid(spec, 300)
