@@ -153,13 +153,14 @@ class ChamberKF(MeasuredKF):
         p_c = self.c.p_c
         return 2 * int(self.x[2] < p_c) + int(self.x[3] < p_c)
 
-    def predict(self, omega: float, p_D: float | None = None):
+    def predict(self, omega: float, p_D: float | None = None, w_friction: float | None = None):
         """One Ts with the motor speed and the friction estimate of eq. 4.36 (from the
-        measured p_D, or the filter's own, when friction_uses_pressure) held over the period;
-        the check-valve states come from the prior chamber pressures."""
+        measured p_D, or the filter's own, when friction_uses_pressure; its sign from
+        w_friction, default omega) held over the period; the check-valve states come from the
+        prior chamber pressures."""
         self.u[0] = omega
         pd = (self.x[2] - self.x[3]) if p_D is None else p_D
-        self.u[1] = friction_estimate(omega, pd if self.friction_uses_pressure else None,
+        self.u[1] = friction_estimate(omega if w_friction is None else w_friction, pd if self.friction_uses_pressure else None,
                                       self.c.A_p, self.c.D_p, self.F_s, self.v_eps)
         self.mode = self.valve_mode()
         self.F, self.G = self.modes[self.mode]

@@ -110,6 +110,8 @@ class Estimator:
         self.isolate = params[e + 'fault.isolate']
         self.alpha_pd = 1.0 - math.exp(-2.0 * math.pi * params[e + 'model.pressure_lowpass']
                                        * self.Ts)
+        fc = params[e + 'model.friction_lowpass']
+        self.alpha_wf = 1.0 - math.exp(-2.0 * math.pi * fc * self.Ts) if fc > 0 else 1.0
         self.detector = fd.FaultDetector.from_params(params, self.Ts)
         self.chinniah = None
         if params[e + 'chinniah.enabled']:
@@ -123,6 +125,7 @@ class Estimator:
         self.started = False
         self._saved = None
         self.omega_prev = 0.0
+        self.w_fric = 0.0           # low-passed pump speed: the friction sign of eq. 4.36
         self.pd_meas = 0.0          # last good measured p_D
         self.pd_filt = 0.0          # its low-pass (model input)
         self.detector.reset()
@@ -155,7 +158,7 @@ class Estimator:
         Predict-only (stale) steps taken since the previous state are provisional: they are
         undone here and replaced by exactly ``ticks`` predictions."""
         if self._saved is not None:
-            self.kf.x[:], self.kf.P[:], self.omega_prev = self._saved
+            self.kf.x[:], self.kf.P[:], self.omega_prev, self.w_fric = self._saved
             self._saved = None
         position = float(position)
         pressure_a, pressure_b = float(pressure_a), float(pressure_b)
@@ -176,7 +179,7 @@ class Estimator:
                 return self._result(0.0, 0.0, True, ','.join(reasons), 0)
             self.kf.reset(position, *((pressure_a, pressure_b) if pr_ok else ()))
             self.pd_filt = self.pd_meas
-            self.omega_prev = w
+            self.omega_prev = self.w_fric = w
             self.started = True
             self.detector.z_prev = position
             return self._result(0.0, 0.0, False, ','.join(reasons), 0)
@@ -211,7 +214,8 @@ class Estimator:
         see :meth:`update`)."""
         if self.started:
             if self._saved is None:
-                self._saved = (self.kf.x.copy(), self.kf.P.copy(), self.omega_prev)
+                self._saved = (self.kf.x.copy(), self.kf.P.copy(), self.omega_prev,
+                               self.w_fric)
             self._predict(self.omega_prev)
         self.detector.tick_without_sample()
         return self._result(0.0, 0.0, True, 'stale', 0)
@@ -220,7 +224,8 @@ class Estimator:
         omega = 0.5 * (self.omega_prev + w)
         self.omega_prev = w
         if self.is_model:
-            self.kf.predict(omega, self.pd_filt if self.use_pressure else None)
+            self.w_fric += self.alpha_wf * (omega - self.w_fric)
+            self.kf.predict(omega, self.pd_filt if self.use_pressure else None, self.w_fric)
         else:
             self.kf.predict()
 

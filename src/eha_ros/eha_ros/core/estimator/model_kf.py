@@ -234,12 +234,13 @@ class ModelKF(MeasuredKF):
         self.x[2] = 0.0 if p_a is None else p_a - p_b
         self.P = self.P0.copy()
 
-    def predict(self, omega: float, p_D: float | None = None):
+    def predict(self, omega: float, p_D: float | None = None, w_friction: float | None = None):
         """One Ts with the motor speed and the measured p_D (friction estimate of eq. 4.36,
         leakage correction) held over the period (ZOH); p_D None: no pressure sensors, the
-        filter's own p_D is used for the leakage term."""
+        filter's own p_D is used for the leakage term. w_friction: the speed whose sign the
+        friction takes (default omega; the estimator passes a low-pass of it)."""
         self.u[0] = omega
-        self.u[1] = friction_estimate(omega, p_D if self.friction_uses_pressure else None,
+        self.u[1] = friction_estimate(omega if w_friction is None else w_friction, p_D if self.friction_uses_pressure else None,
                                       self.h.A_p, self.h.D_p, self.F_s, self.v_eps)
         if self.i_leak is not None:
             pd = self.x[2] if p_D is None else p_D

@@ -29,6 +29,9 @@ ESTIMATOR = Schema('estimator', [
           doc='pump-flow velocity over which eq. 4.36 friction reaches full sign'),
     Param(E + 'model.friction_pressure', 'bool', '', False,
           doc='use the measured p_D in min(|p_D A_p|, F_s) of eq. 4.36 (adds pressure noise)'),
+    Param(E + 'model.friction_lowpass', 'float', 'Hz', 50.0, 0.0, 500.0,
+          doc='low-pass of the motor speed that gives eq. 4.36 its sign of xdot (0 = none): '
+              'command chatter above it must not flip the modelled friction'),
     Param(E + 'model.pressure_lowpass', 'float', 'Hz', 30.0, 0.1, 500.0,
           doc='low-pass of the measured p_D used as a model input (friction, leakage column)'),
     Param(E + 'model.sensor_gm', 'bool', '', True,

@@ -25,8 +25,8 @@ K_MODEL, K_USE_P, K_FRIC_P, K_ILEAK, K_NLIN = 5, 6, 7, 8, 9
 K_AP, K_DP, K_FS, K_VEPS, K_ISOLATE = 10, 11, 12, 13, 14
 K_JUMP, K_JUMP_N, K_STUCK_N, K_STUCK_TOL, K_DRIFT_K, K_DRIFT_H, K_DRIFT_N, K_HOLD = \
     15, 16, 17, 18, 19, 20, 21, 22
-K_CHAMBERS, K_PC = 23, 24
-NK = 25
+K_CHAMBERS, K_PC, K_ALPHA_WF = 23, 24, 25
+NK = 26
 # state
 E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
 E_NJUMP, E_NSAME, E_NDRIFT, E_GPOS, E_GNEG, E_ZPREV, E_HAS_ZPREV = 4, 5, 6, 7, 8, 9, 10
@@ -34,7 +34,8 @@ E_HOLD = 11            # 3 entries: JUMP, STUCK, DRIFT
 E_DET = 14             # 3 entries
 E_CODE = 17
 E_MODE = 18            # check-valve state of the chamber filter
-NE = 19
+E_WFRIC = 19           # low-passed pump speed (friction sign)
+NE = 20
 CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
 
 
@@ -48,7 +49,7 @@ def pack(est):
     kf, d = est.kf, est.detector
     k = np.zeros(NK)
     k[K_XMAX], k[K_PMIN], k[K_PMAX], k[K_WMAX] = est.x_max, est.p_min, est.p_max, est.w_max
-    k[K_ALPHA_PD] = est.alpha_pd
+    k[K_ALPHA_PD], k[K_ALPHA_WF] = est.alpha_pd, est.alpha_wf
     k[K_MODEL] = est.is_model
     k[K_USE_P] = est.use_pressure
     k[K_ISOLATE] = est.isolate
@@ -68,6 +69,7 @@ def pack(est):
     k[K_HOLD] = d.hold_ticks
     e = np.zeros(NE)
     e[E_OMEGA], e[E_PD_MEAS], e[E_PD_FILT] = est.omega_prev, est.pd_meas, est.pd_filt
+    e[E_WFRIC] = est.w_fric
     e[E_UPDATES] = est.updates
     e[E_NJUMP], e[E_NSAME], e[E_NDRIFT] = d.n_jump, d.n_same, d.n_drift
     e[E_GPOS], e[E_GNEG] = d.g_pos, d.g_neg
@@ -97,8 +99,8 @@ def pack(est):
 
 def unpack(est, e) -> None:
     d = est.detector
-    est.omega_prev, est.pd_meas, est.pd_filt = (float(e[i]) for i in
-                                                (E_OMEGA, E_PD_MEAS, E_PD_FILT))
+    est.omega_prev, est.pd_meas, est.pd_filt, est.w_fric = (
+        float(e[i]) for i in (E_OMEGA, E_PD_MEAS, E_PD_FILT, E_WFRIC))
     est.updates = int(e[E_UPDATES])
     d.n_jump, d.n_same, d.n_drift = int(e[E_NJUMP]), int(e[E_NSAME]), int(e[E_NDRIFT])
     d.g_pos, d.g_neg = float(e[E_GPOS]), float(e[E_GNEG])
@@ -196,10 +198,12 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
     omega = 0.5 * (e[E_OMEGA] + w)
     e[E_OMEGA] = w
     use_p = k[K_USE_P] > 0.5
+    if k[K_MODEL] > 0.5:                  # chamber filters are model filters too
+        e[E_WFRIC] += k[K_ALPHA_WF] * (omega - e[E_WFRIC])
     if k[K_CHAMBERS] > 0.5:
         u[0] = omega
         pd = e[E_PD_FILT] if use_p else x[2] - x[3]
-        u[1] = friction_estimate(omega, pd, k[K_FRIC_P] > 0.5, k[K_AP], k[K_DP], k[K_FS],
+        u[1] = friction_estimate(e[E_WFRIC], pd, k[K_FRIC_P] > 0.5, k[K_AP], k[K_DP], k[K_FS],
                                  k[K_VEPS])
         mode = 2 * (x[2] < k[K_PC]) + (x[3] < k[K_PC])
         e[E_MODE] = mode
@@ -212,7 +216,7 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
     elif k[K_MODEL] > 0.5:
         u[0] = omega
         has_pd = use_p and k[K_FRIC_P] > 0.5
-        u[1] = friction_estimate(omega, e[E_PD_FILT], has_pd, k[K_AP], k[K_DP], k[K_FS],
+        u[1] = friction_estimate(e[E_WFRIC], e[E_PD_FILT], has_pd, k[K_AP], k[K_DP], k[K_FS],
                                  k[K_VEPS])
         il = int(k[K_ILEAK])
         if il >= 0:
