@@ -131,28 +131,35 @@ def test_stack_default_controller_checks_and_its_stiffness_gap():
     assert r['bw_nominal_hz'] >= 9.0 and max(abs(v) for v in G.poles + G.zeros) <= 1000.0 * (1 + 1e-9)
 
 
-def test_stiff_design_costs_steady_accuracy_on_the_nonlinear_stack(tmp_path):
-    """Batch stack (nonlinear plant, sensor noise, chamber Kalman filter), 5 mm step, seeds 1-3:
-    the QFT design that meets eq. 4.60 turns the estimate noise into a speed command ~10x
-    noisier than the default controller, and the piston ends tens of um off target while the
-    estimate says it is there. Measured, so the README's statement stays true."""
+def test_stiff_design_keeps_steady_accuracy_with_the_friction_lowpass(tmp_path):
+    """Batch stack (nonlinear plant, sensor noise, chamber Kalman filter), 5 mm step, seeds 1-3,
+    the stiff design config/controller_qft.yaml. Its gain above 1000 rad/s makes the speed
+    command chatter, and eq. 4.36 takes the friction's sign from the pump speed: without the
+    estimator's friction low-pass (estimator.model.friction_lowpass: 0) the modelled +-800 N
+    flips with the chatter, the filter drifts from the truth and the piston ends tens of um off
+    target (and the command gets noisier still). With the 50 Hz default it ends within 20 um,
+    like the stack's controller."""
     import shutil
     from eha_ros.core.batch import BatchStack
-    cfg = tmp_path / 'config'
-    shutil.copytree(os.path.join(ROOT, 'config'), cfg)
-    shutil.copy(cfg / 'controller_qft.yaml', cfg / 'controller.yaml')
+    stiff = tmp_path / 'config'
+    shutil.copytree(os.path.join(ROOT, 'config'), stiff)
+    shutil.copy(stiff / 'controller_qft.yaml', stiff / 'controller.yaml')
     res = {}
-    for name, d in (('default', os.path.join(ROOT, 'config')), ('stiff', str(cfg))):
+    for name, d, lp in (('stack controller', os.path.join(ROOT, 'config'), None),
+                        ('stiff', str(stiff), None), ('stiff, no low-pass', str(stiff), 0.0)):
+        ov = {} if lp is None else \
+            {'estimator': {'estimator:estimator.model.friction_lowpass': lp}}
         err, noise = [], []
         for seed in (1, 2, 3):
-            out = BatchStack(config_dir=d, seed=seed).run(np.r_[np.zeros(1000), np.full(1500, 0.005)])
+            out = BatchStack(config_dir=d, seed=seed, overrides=ov).run(np.r_[np.zeros(1000), np.full(1500, 0.005)])
             x, u = out['truth'][1000:], out['command'][1000:]
             err.append(abs(np.mean(x[1000:1400]) - 0.005))
             noise.append(np.std(u[1000:1400]))
         res[name] = (max(err), float(np.mean(noise)))
     print('5 mm step, worst steady error [m] and command noise [rad/s]:', res)
-    assert res['default'][0] <= 20e-6 and res['stiff'][0] > 20e-6
-    assert res['stiff'][1] > 4 * res['default'][1]
+    assert res['stack controller'][0] <= 20e-6 and res['stiff'][0] <= 20e-6
+    assert res['stiff, no low-pass'][0] > 20e-6
+    assert res['stiff, no low-pass'][1] > 3 * res['stiff'][1]
 
 
 def test_drive_gains_equal_designed_velocity_controller():

@@ -172,17 +172,18 @@ def publish_counted(node, pub, msg, what: str) -> None:
 
 class StartGate:
     """Lock-step start: tick 0 is held until every node named in ``names`` subscribes to every
-    topic under ``prefix`` that has a publisher (a recorder, so a recording starts at tick 0
-    and two runs record the same ticks), seen on two polls in a row, or until ``timeout`` s
-    of wall time after start-up (then a warning names what was missing)."""
+    topic under ``prefix`` that has a publisher (a recorder, so a recording starts within the
+    first ticks), seen for ``settle`` s in a row (the graph shows a subscription before DDS has
+    matched it with another node's publisher), or until ``timeout`` s of wall time after
+    start-up (then a warning names what was missing)."""
 
-    def __init__(self, node, names, prefix: str, timeout: float):
-        self.node, self.prefix = node, prefix
+    def __init__(self, node, names, prefix: str, timeout: float, settle: float = 0.25):
+        self.node, self.prefix, self.settle = node, prefix, settle
         self.names = [n for n in names if n]
         self.deadline = time.monotonic() + timeout
         self.timeout = timeout
         self.open = not self.names
-        self.seen = 0                     # polls in a row that found nothing missing
+        self.since = None                 # wall time since which nothing was missing
 
     def missing(self) -> list[str]:
         n = self.node
@@ -199,12 +200,13 @@ class StartGate:
         if self.open:
             return True
         missing = self.missing()
-        self.seen = 0 if missing else self.seen + 1
-        if self.seen >= 2:
+        now = time.monotonic()
+        self.since = None if missing else (self.since or now)
+        if self.since is not None and now - self.since >= self.settle:
             self.open = True
             self.node.get_logger().info(f'lock-step start: {", ".join(self.names)} subscribed '
                                         f'to every {self.prefix}* topic; stepping')
-        elif time.monotonic() > self.deadline:
+        elif now > self.deadline:
             self.open = True
             self.node.get_logger().warning(
                 f'lock-step start: still missing after {self.timeout:g} s: '
