@@ -238,20 +238,28 @@ def test_lockstep_steps_only_on_command(ros_node):
         stop_process(proc)
 
 
+def held_plant(ros_node, ns, *params):
+    """Lock-step plant_sim under ``ns`` with a start gate; state(0) received and command(0)
+    sent. Returns (process, received states)."""
+    from eha_msgs.msg import ActuatorCommand, ActuatorState
+    proc = start_process(plant_cmd('-p', 'sim_node.lockstep:=true', '-r', f'__ns:={ns}',
+                                   *params))
+    states = []
+    ros_node.create_subscription(ActuatorState, f'{ns}/eha/state', states.append, 100)
+    pub = ros_node.create_publisher(ActuatorCommand, f'{ns}/eha/command', 10)
+    assert wait_for(lambda: len(states) >= 1, 60)
+    wait_matched(pub)
+    pub.publish(ActuatorCommand(seq=0, motor_speed_ref=10.0))
+    return proc, states
+
+
 def test_lockstep_start_waits_for_named_subscribers(ros_node):
     """sim_node.lockstep_start_after (what run_stack --record sets for the recorder): tick 0
     is held until the named node subscribes to every /eha topic with a publisher."""
-    from eha_msgs.msg import ActuatorCommand, ActuatorState, PlantTruth
+    from eha_msgs.msg import ActuatorCommand, PlantTruth
     me = ros_node.get_name()
-    proc = start_process(plant_cmd('-p', 'sim_node.lockstep:=true', '-r', '__ns:=/lg',
-                                   '-p', f'sim_node.lockstep_start_after:=[{me}]'))
+    proc, states = held_plant(ros_node, '/lg', '-p', f'sim_node.lockstep_start_after:=[{me}]')
     try:
-        states = []
-        ros_node.create_subscription(ActuatorState, '/lg/eha/state', states.append, 100)
-        pub = ros_node.create_publisher(ActuatorCommand, '/lg/eha/command', 10)
-        assert wait_for(lambda: len(states) >= 1, 60)
-        wait_matched(pub)
-        pub.publish(ActuatorCommand(seq=0, motor_speed_ref=10.0))
         time.sleep(1.5)          # we do not subscribe to eha/sim/truth or eha/command yet: held
         assert max(s.seq for s in states) == 0
         ros_node.create_subscription(PlantTruth, '/lg/eha/sim/truth', lambda m: None, 10)
@@ -263,17 +271,9 @@ def test_lockstep_start_waits_for_named_subscribers(ros_node):
 
 
 def test_lockstep_start_gives_up_after_its_timeout(ros_node):
-    from eha_msgs.msg import ActuatorCommand, ActuatorState
-    proc = start_process(plant_cmd('-p', 'sim_node.lockstep:=true', '-r', '__ns:=/lt',
-                                   '-p', 'sim_node.lockstep_start_after:=[nobody]',
-                                   '-p', 'sim_node.lockstep_start_timeout:=1.0'))
+    proc, states = held_plant(ros_node, '/lt', '-p', 'sim_node.lockstep_start_after:=[nobody]',
+                              '-p', 'sim_node.lockstep_start_timeout:=1.0')
     try:
-        states = []
-        ros_node.create_subscription(ActuatorState, '/lt/eha/state', states.append, 100)
-        pub = ros_node.create_publisher(ActuatorCommand, '/lt/eha/command', 10)
-        assert wait_for(lambda: len(states) >= 1, 60)
-        wait_matched(pub)
-        pub.publish(ActuatorCommand(seq=0, motor_speed_ref=10.0))
         assert wait_for(lambda: states[-1].seq == 1, 20), 'tick 0 held beyond the timeout'
     finally:
         _, _, err = stop_process(proc)
