@@ -14,13 +14,9 @@ import time
 from .core.batch import NODE_FILES
 from .core.params import default_config_dir
 
-# plant-side nodes: their own lock-step switch (they publish /clock); the others use sim time
-LOCKSTEP_PARAM = {'plant_sim': 'plant_sim:sim_node.lockstep:=true',
-                  'hardware_bridge': 'hardware_bridge:bridge.lockstep:=true'}
-# lock-step with a recording: the plant side holds tick 0 until the recorder has subscribed
-START_AFTER_RECORDER = {'plant_sim': 'plant_sim:sim_node.lockstep_start_after:=[recorder]',
-                        'hardware_bridge':
-                            'hardware_bridge:bridge.lockstep_start_after:=[recorder]'}
+# plant-side nodes and the prefix of their lock-step parameters (plant_sim_params.
+# lockstep_params): their own switch (they publish /clock); the others use sim time
+LOCKSTEP_PREFIX = {'plant_sim': 'sim_node', 'hardware_bridge': 'bridge'}
 
 
 def cpu_seconds(pid: int) -> float:
@@ -84,10 +80,13 @@ class Stack:
         if lockstep:           # the plant steps per command and publishes /clock; others follow it
             for name in self.nodes:
                 self.extra.setdefault(name, [])
-                self.extra[name] += (['-p', LOCKSTEP_PARAM[name]] if name in LOCKSTEP_PARAM
-                                     else ['-p', 'use_sim_time:=true'])
-                if record and name in START_AFTER_RECORDER:
-                    self.extra[name] += ['-p', START_AFTER_RECORDER[name]]
+                pre = LOCKSTEP_PREFIX.get(name)
+                if pre is None:
+                    self.extra[name] += ['-p', 'use_sim_time:=true']
+                    continue
+                self.extra[name] += ['-p', f'{name}:{pre}.lockstep:=true']
+                if record:      # the plant side holds tick 0 until the recorder has subscribed
+                    self.extra[name] += ['-p', f'{name}:{pre}.lockstep_start_after:=[recorder]']
         if record:
             self.extra.setdefault('recorder', [])
             self.extra['recorder'] += ['-p', f'recorder:recorder.output:={record}']

@@ -4,17 +4,27 @@ from __future__ import annotations
 from .params import Param, Schema
 from .plant.parameters import PLANT_SCHEMA
 
+
+
+def lockstep_params(prefix: str) -> list:
+    """The lock-step switches of a plant-side node (plant_sim: sim_node, hardware_bridge:
+    bridge): it publishes /clock and steps per command; nodes.common.StartGate holds tick 0."""
+    return [
+        Param(f'{prefix}.lockstep', 'bool', '', False,
+              doc='step only when the command of the previous state arrived; publish /clock'),
+        Param(f'{prefix}.lockstep_timeout', 'float', 's', 1.0, 1e-3, 60.0,
+              doc='lock-step: re-publish state(k) after this wall time without command(k)'),
+        Param(f'{prefix}.lockstep_start_after', 'str[]', '', [''], min_len=1,
+              doc='lock-step: hold tick 0 until these nodes subscribe to every /eha topic with '
+                  'a publisher (run_stack --record adds the recorder); empty string = none'),
+        Param(f'{prefix}.lockstep_start_timeout', 'float', 's', 30.0, 0.0, 600.0,
+              doc='lock-step: step anyway (with a warning) after this wall time at tick 0'),
+    ]
+
+
 NODE = Schema('plant_sim', [
     Param('sim_node.seed', 'int', '', 0, 0, 2**31 - 1, doc='noise generator seed'),
-    Param('sim_node.lockstep', 'bool', '', False,
-          doc='step only when the command of the previous state arrived; publish /clock'),
-    Param('sim_node.lockstep_timeout', 'float', 's', 1.0, 1e-3, 60.0,
-          doc='lock-step: re-publish state(k) after this wall time without command(k)'),
-    Param('sim_node.lockstep_start_after', 'str[]', '', [''], min_len=1,
-          doc='lock-step: hold tick 0 until these nodes subscribe to every /eha topic with a '
-              'publisher (run_stack --record adds the recorder); empty string = none'),
-    Param('sim_node.lockstep_start_timeout', 'float', 's', 30.0, 0.0, 600.0,
-          doc='lock-step: step anyway (with a warning) after this wall time at tick 0'),
+    *lockstep_params('sim_node'),
     Param('sim_node.initial_position', 'float', 'm', 0.0, -0.06, 0.06),
     Param('sim_node.command_timeout', 'float', 's', 0.05, 1e-3, 10.0,
           doc='no command for this long: speed reference goes to zero and is reported'),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from ..params import Param, Schema
 from ..plant.parameters import PLANT_SCHEMA
+from ..plant_sim_params import lockstep_params
 
 NODE = Schema('hardware_bridge', [
     Param('ads.ams_net_id', 'str', '', '127.0.0.1.1.1',
@@ -20,15 +21,7 @@ NODE = Schema('hardware_bridge', [
           doc='time between reconnection attempts while the link is down'),
     Param('bridge.symbol_map', 'str', '', 'ads_symbols.yaml',
           doc='symbol map YAML; a relative path is taken from the config folder'),
-    Param('bridge.lockstep', 'bool', '', False,
-          doc='cycle only when the command of the previous state arrived; publish /clock'),
-    Param('bridge.lockstep_timeout', 'float', 's', 1.0, 1e-3, 60.0,
-          doc='lock-step: re-publish state(k) after this wall time without command(k)'),
-    Param('bridge.lockstep_start_after', 'str[]', '', [''], min_len=1,
-          doc='lock-step: hold the first cycle until these nodes subscribe to every /eha topic '
-              'with a publisher (run_stack --record adds the recorder); empty string = none'),
-    Param('bridge.lockstep_start_timeout', 'float', 's', 30.0, 0.0, 600.0,
-          doc='lock-step: cycle anyway (with a warning) after this wall time'),
+    *lockstep_params('bridge'),
     Param('bridge.max_speed', 'float', 'rad/s', 837.758041, 1.0, 5000.0,
           doc='commands beyond this magnitude are saturated and counted'),
     Param('bridge.max_speed_rate', 'float', 'rad/s^2', 5.0e5, 10.0, 1.0e8,

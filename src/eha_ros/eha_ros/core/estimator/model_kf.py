@@ -16,12 +16,12 @@ Corrections to the printed eq. 4.35 (stated here because they change the filter)
   How it is evaluated (choices, see :func:`friction_estimate`): sign(xdot) is taken from the
   measured motor speed (the estimator passes its 50 Hz low-pass, model.friction_lowpass, so
   speed-command chatter does not flip it), saturated over a small pump-flow band v_eps (the
-  pump drives the piston, xdot ~ D_p omega / A_p, eq. 3.22 at steady state), and p_D, if used, is the
-  measured load pressure (estimator.model.friction_pressure; otherwise |F_L| = F_s while
-  moving). Evaluating it from the filter's own xdot and p_D states, held over Ts, is an
-  explicit feedback A_p p_D[k-1] across the ~760 Hz hydraulic mode and made the discrete
-  model chatter (tried: the estimate's error was 3x the raw sensor's); a hard sign kicked
-  the p_D state at every reversal.
+  pump drives the piston, xdot ~ D_p omega / A_p, eq. 3.22 at steady state), and p_D, if
+  used, is the measured load pressure (estimator.model.friction_pressure; otherwise
+  |F_L| = F_s while moving). Evaluating it from the filter's own xdot and p_D states, held
+  over Ts, is an explicit feedback A_p p_D[k-1] across the ~760 Hz hydraulic mode and made
+  the discrete model chatter (tried: the estimate's error was 3x the raw sensor's); a hard
+  sign kicked the p_D state at every reversal.
 - The p_D leakage coefficient k_L: eq. 3.22 derives 2 C_eq beta/V_d (k_L = 2), eq. 4.35
   prints C_eq beta/V_d (k_L = 1). The nonlinear plant follows eq. 3.22 (checked with C_r = 0),
   so k_L = 2 is the default (YAML estimator.model.pd_leakage: eq3_22 | eq4_35 | boost, the
@@ -241,7 +241,8 @@ class ModelKF(MeasuredKF):
         filter's own p_D is used for the leakage term. w_friction: the speed whose sign the
         friction takes (default omega; the estimator passes a low-pass of it)."""
         self.u[0] = omega
-        self.u[1] = friction_estimate(omega if w_friction is None else w_friction, p_D if self.friction_uses_pressure else None,
+        w = omega if w_friction is None else w_friction
+        self.u[1] = friction_estimate(w, p_D if self.friction_uses_pressure else None,
                                       self.h.A_p, self.h.D_p, self.F_s, self.v_eps)
         if self.i_leak is not None:
             pd = self.x[2] if p_D is None else p_D
