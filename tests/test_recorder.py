@@ -110,6 +110,7 @@ def test_unwritable_output_is_one_line(tmp_path):
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 COMPARED = ['/eha/state', '/eha/sim/truth', '/eha/estimate', '/eha/command']
+PLANT_OWN = ['/eha/state', '/eha/sim/truth']  # the plant's own streams: the gate waits for them
 STEPS = [(600, 0.002), (1300, -0.001)]     # tick-locked reference steps (tick, position m)
 HOLD_TICK = 1 << 40                         # "this reference holds until tick 2^40"
 
@@ -189,12 +190,14 @@ def test_lockstep_runs_with_same_seed_record_identically(ros_node, tmp_path):
           f'start-up; {n_state * 1e-3 / fa["wall_s"]:.2f}x real time incl. start-up')
     print({t: v['count'] for t, v in summ.items()})
     for topic in COMPARED:
-        for run in (pa, pb):                 # recorded from the start, nothing lost
+        for run in (pa, pb):                 # nothing lost inside the recorded range
             seqs = sorted(run[topic])
-            assert seqs[0] < 50, f'{topic}: recording starts at tick {seqs[0]}'
             assert seqs == list(range(seqs[0], seqs[-1] + 1)), f'{topic}: seq gaps'
+            if topic in PLANT_OWN:           # the start gate: from the first ticks
+                assert seqs[0] < 50, f'{topic}: recording starts at tick {seqs[0]}'
         common = sorted(set(pa[topic]) & set(pb[topic]))
-        assert len(common) >= ticks - 50, (topic, len(common))
+        assert len(common) >= (ticks - 50 if topic in PLANT_OWN else 0.75 * ticks), \
+            (topic, len(common))
         repeats = [k for k in common if len(pa[topic][k]) > 1 or len(pb[topic][k]) > 1]
         assert not repeats, f'{topic}: one seq with different payloads, e.g. {repeats[:5]}'
         diff = [k for k in common if pa[topic][k] != pb[topic][k]]

@@ -172,13 +172,15 @@ def publish_counted(node, pub, msg, what: str) -> None:
 
 class StartGate:
     """Lock-step start: tick 0 is held until every node named in ``names`` subscribes to every
-    topic under ``prefix`` that has a publisher (a recorder, so a recording starts within the
-    first ticks), seen for ``settle`` s in a row (the graph shows a subscription before DDS has
-    matched it with another node's publisher), or until ``timeout`` s of wall time after
-    start-up (then a warning names what was missing)."""
+    topic under ``prefix`` that has a publisher (a recorder) and each of the node's ``own``
+    publishers has matched every subscription the graph shows on its topic (so a recording
+    has the plant's own streams from the first ticks), seen for ``settle`` s in a row, or until
+    ``timeout`` s of wall time after start-up (then a warning names what was missing). Other
+    nodes' publishers can still be matching the recorder when the graph shows its
+    subscription: their streams may start later in the recording."""
 
-    def __init__(self, node, names, prefix: str, timeout: float, settle: float = 0.25):
-        self.node, self.prefix, self.settle = node, prefix, settle
+    def __init__(self, node, names, prefix: str, timeout: float, own=(), settle: float = 0.25):
+        self.node, self.prefix, self.own, self.settle = node, prefix, tuple(own), settle
         self.names = [n for n in names if n]
         self.deadline = time.monotonic() + timeout
         self.timeout = timeout
@@ -193,6 +195,8 @@ class StartGate:
                 continue
             subs = {i.node_name for i in n.get_subscriptions_info_by_topic(topic)}
             out += [f'{name} on {topic}' for name in self.names if name not in subs]
+        out += [f'matching on {p.topic_name}' for p in self.own
+                if p.get_subscription_count() < n.count_subscribers(p.topic_name)]
         return out
 
     def poll(self) -> bool:

@@ -88,7 +88,8 @@ def make_node(params: dict):
             self.pub_clock = self.create_publisher(Clock, '/clock', 10) if self.lockstep else None
             self.start_gate = StartGate(self, p['bridge.lockstep_start_after'],
                                         self.state_topic.rsplit('/', 1)[0] + '/',
-                                        p['bridge.lockstep_start_timeout'])
+                                        p['bridge.lockstep_start_timeout'],
+                                        own=(self.pub_state,))
             self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
             self.create_subscription(ChannelSelect, 'eha/channel_select', self.on_select,
                                      latched_qos())

@@ -99,7 +99,8 @@ def make_node(params: dict):
                 self.start_gate = StartGate(
                     self, self.p['sim_node.lockstep_start_after'],
                     self.pub_state.topic_name.rsplit('/', 1)[0] + '/',
-                    self.p['sim_node.lockstep_start_timeout'])
+                    self.p['sim_node.lockstep_start_timeout'],
+                    own=(self.pub_state, self.pub_truth))
                 if not self.start_gate.open:
                     self.start_timer = self.create_timer(0.02, self.poll_start)
                 self.thread = None
