@@ -1,0 +1,422 @@
+"""Campaigns: one scenario over a plant family, on Dask distributed (scripts/campaign).
+
+Only the plant varies; estimator, controller and switch manager keep the nominal parameters
+of config/ (as on a bench whose actuator differs from its datasheet). The client loads every
+parameter file, the family and the linear predictions, and ships them with each task, so a
+worker needs only the installed package, not the same config/ folder.
+
+Engine: a ``distributed.LocalCluster`` with one single-threaded worker process per core by
+default (numba kernels cached on disk, so a warm worker starts in seconds), or any running
+Dask scheduler (``scheduler='tcp://host:8786'``). Tasks carry chunks of plants. A worker that
+dies loses only the chunk it was running, which the scheduler gives to another worker. Each
+finished chunk is written at once to DIR/parts/ (rows as Parquet, traces as npz), so an
+interrupted campaign keeps what it has and ``resume=DIR`` runs only the rest.
+
+Output in DIR: results.parquet (one row per plant and seed), traces.npz, campaign.json,
+report.md with its figures (core.sim.report).
+"""
+from __future__ import annotations
+
+import glob
+import json
+import math
+import os
+import signal
+import socket
+import sys
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..cli import UsageError
+from . import family as FAM
+from . import scenarios as SC
+
+NODES = ('plant_sim', 'estimator', 'controller', 'switch_manager')
+MULT = FAM.COLUMNS
+ID_COLUMNS = ('run_id',) + MULT + ('seed',)
+
+
+@dataclass
+class CampaignResult:
+    out_dir: str
+    info: dict            # what campaign.json holds
+    results: object       # pandas.DataFrame, one row per run
+
+    @property
+    def passed(self) -> int:
+        return int(self.info['passed'])
+
+    @property
+    def failed(self) -> int:
+        return int(self.info['failed'])
+
+
+def nominal_params(config_dir: str | None = None) -> dict:
+    """{node: parameter dict} of the loop's nodes from config/ (core.batch.NODE_FILES)."""
+    from ..batch import node_params
+    from ..controller.params import SCHEMA as CTL
+    from ..estimator.params import SCHEMA as EST
+    from ..plant_sim_params import SCHEMA as SIM
+    from ..redundancy.params import SCHEMA as SW, check
+    schemas = {'plant_sim': SIM, 'estimator': EST, 'controller': CTL, 'switch_manager': SW}
+    out = {n: node_params(n, schemas[n], config_dir) for n in NODES}
+    check(out['switch_manager'])
+    return out
+
+
+def run_chunk(scn_doc: dict, nominal: dict, rows: list, trace: bool = True):
+    """Worker task: the runs of one chunk. rows: dicts with ID_COLUMNS and any extra per-plant
+    columns (linear predictions). Returns (row dicts with figures, traces or None)."""
+    import traceback
+    scn = SC.from_dict({k: scn_doc[k] for k in ('name', 'kind', 'description', 'params',
+                                                 'specs')})
+    out, traces = [], []
+    for row in rows:
+        t0 = time.perf_counter()
+        r = dict(row)
+        try:
+            figs, tr = SC.run(scn, nominal, row, int(row['seed']), extra=row, trace=trace)
+            r.update(figs)
+            r['passed'], r['failed_specs'] = SC.judge(r, scn.specs)
+            r['error'] = ''
+        except Exception as err:        # a run that raises is a failed row, not a lost chunk
+            tr = None
+            r.update(passed=False, failed_specs='error',
+                     error=f'{type(err).__name__}: {err} '
+                           f'[{traceback.extract_tb(err.__traceback__)[-1].name}]')
+        r['wall_s'] = time.perf_counter() - t0
+        out.append(r)
+        traces.append(tr)
+    return out, traces
+
+
+# ------------------------------------------------------------------------------ engine
+def _free_port(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(('127.0.0.1', port))
+            return True
+        except OSError:
+            return False
+
+
+def connect(workers: int | None, scheduler: str | None, quiet: bool = False):
+    """(client, cluster or None): a LocalCluster of ``workers`` single-threaded processes, or
+    a client of the running scheduler at ``scheduler``; UsageError when it cannot be reached."""
+    import logging
+
+    from distributed import Client, LocalCluster
+    logging.getLogger('distributed').setLevel(logging.ERROR)
+    if scheduler:
+        try:
+            return Client(scheduler, timeout='10s'), None
+        except (OSError, TimeoutError, ValueError) as err:
+            raise UsageError(f'scheduler {scheduler}: cannot connect '
+                             f'({str(err).splitlines()[0][:160]})')
+    n = int(workers or os.cpu_count() or 1)
+    if n < 1:
+        raise UsageError(f'--workers {workers}: expected at least 1')
+    for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS',
+                'NUMBA_NUM_THREADS'):
+        os.environ.setdefault(var, '1')       # one core per worker, inherited by the workers
+    # Ctrl-C on a terminal reaches the whole process group: the workers (and their nannies)
+    # start with SIGINT ignored, so only this process reacts (keeps the rows, closes them)
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               dashboard_address=':8787' if _free_port(8787) else ':0',
+                               silence_logs=logging.ERROR)
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, old)
+    return Client(cluster), cluster
+
+
+def chunks(ids: list, n_workers: int, size: int | None = None) -> list:
+    """Split run ids into chunks, largest first (guided scheduling): each about a quarter of
+    the remaining runs per worker, at most 8 (a lost worker costs little) and down to 1 at
+    the end, so no worker idles long while another finishes a big last chunk."""
+    out, i = [], 0
+    while i < len(ids):
+        k = size or max(1, min(8, math.ceil((len(ids) - i) / max(1, 4 * n_workers))))
+        out.append(ids[i:i + k])
+        i += k
+    return out
+
+
+class Progress:
+    """Runs done, failures so far and ETA: a tqdm bar on a terminal, a line every 10 % or
+    15 s otherwise (logs, CI)."""
+
+    def __init__(self, total: int, done: int, label: str, enabled: bool = True):
+        self.total, self.done, self.failed = total, done, 0
+        self.t0, self.last = time.monotonic(), 0.0
+        self.label, self.enabled = label, enabled
+        self.bar = None
+        self.start_done = done
+        if enabled and sys.stderr.isatty():
+            from tqdm import tqdm
+            self.bar = tqdm(total=total, initial=done, desc=label, unit='run',
+                            file=sys.stderr, dynamic_ncols=True)
+
+    def update(self, n: int, failed: int):
+        self.done += n
+        self.failed += failed
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.update(n)
+            self.bar.set_postfix(failed=self.failed)
+            return
+        now = time.monotonic() - self.t0
+        step = max(1, self.total // 10)
+        if (self.done // step != (self.done - n) // step or now - self.last >= 15.0
+                or self.done == self.total):
+            self.last = now
+            rate = (self.done - self.start_done) / now if now > 0 else 0.0
+            eta = (self.total - self.done) / rate if rate > 0 else math.inf
+            print(f'{self.label}: {self.done}/{self.total} runs, {self.failed} failed, '
+                  f'{now:.0f} s, ETA {eta:.0f} s' if math.isfinite(eta) else
+                  f'{self.label}: {self.done}/{self.total} runs, {self.failed} failed, '
+                  f'{now:.0f} s', file=sys.stderr, flush=True)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+# ------------------------------------------------------------------------------ output
+def _write_part(parts: str, rows: list, traces: list) -> None:
+    """One finished chunk: parts/chunk-<first run id>.parquet (+ .npz of its traces); written
+    under a temporary name and renamed, so a part is whole or absent."""
+    import pandas as pd
+    index = int(rows[0]['run_id'])
+    tmp = os.path.join(parts, f'.chunk-{index:06d}.tmp')
+    pd.DataFrame(rows).to_parquet(tmp + '.parquet', index=False)
+    good = [(r['run_id'], tr) for r, tr in zip(rows, traces) if tr is not None]
+    if good:
+        np.savez(tmp + '.npz', run_id=np.array([g[0] for g in good]),
+                 **{k: np.array([g[1][k] for g in good], dtype=object)
+                    for k in good[0][1]})
+        os.replace(tmp + '.npz', os.path.join(parts, f'chunk-{index:06d}.npz'))
+    os.replace(tmp + '.parquet', os.path.join(parts, f'chunk-{index:06d}.parquet'))
+
+
+def read_parts(out_dir: str):
+    """(rows DataFrame, traces dict or None) of every finished chunk in DIR/parts."""
+    import pandas as pd
+    files = sorted(glob.glob(os.path.join(out_dir, 'parts', 'chunk-*.parquet')))
+    frames = [pd.read_parquet(f) for f in files]
+    df = (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame())
+    if len(df):
+        df = df.drop_duplicates('run_id', keep='last').sort_values('run_id')
+        df = df.reset_index(drop=True)
+    traces = _merge_traces(sorted(glob.glob(os.path.join(out_dir, 'parts', 'chunk-*.npz'))))
+    return df, traces
+
+
+def _merge_traces(files: list):
+    """One {'t', 'run_id', signal: (N, M)} of the per-chunk traces, resampled on the longest
+    run's time base (runs of one scenario have the same length)."""
+    ids, sig = [], {}
+    for f in files:
+        with np.load(f, allow_pickle=True) as z:
+            ids.extend(int(i) for i in z['run_id'])
+            for k in z.files:
+                if k != 'run_id':
+                    sig.setdefault(k, []).extend(list(z[k]))
+    if not ids:
+        return None
+    order = np.argsort(ids, kind='stable')
+    _, first = np.unique(np.asarray(ids)[order], return_index=True)
+    keep = order[first]
+    m = min(len(a) for a in sig['t'])
+    out = {'t': np.asarray(sig['t'][keep[0]][:m], float), 'run_id': np.asarray(ids)[keep]}
+    for k, v in sig.items():
+        if k != 't':
+            out[k] = np.array([np.asarray(v[i][:m], float) for i in keep])
+    return out
+
+
+def _write_json(path: str, obj: dict) -> None:
+    tmp = path + '.tmp'
+    with open(tmp, 'w') as f:
+        json.dump(obj, f, indent=2, sort_keys=True, default=_jsonable)
+        f.write('\n')
+    os.replace(tmp, path)
+
+
+def _jsonable(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def default_out(scenario: str, family: str) -> str:
+    stamp = time.strftime('%Y%m%d-%H%M%S')
+    fam = family if not os.path.exists(family) else os.path.splitext(os.path.basename(family))[0]
+    return os.path.join('out', 'campaign', f'{scenario}-{fam.replace(":", "")}-{stamp}')
+
+
+# ------------------------------------------------------------------------------ API
+def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', seed: int = 1,
+                 workers: int | None = None, scheduler: str | None = None,
+                 out: str | None = None, resume: str | None = None, client=None,
+                 config_dir: str | None = None, progress: bool = True, report: bool = True,
+                 chunk_size: int | None = None, trace: bool = True,
+                 log=print) -> CampaignResult:
+    """Run ``scenario`` (name in config/campaigns/ or a YAML path) on ``family`` ('thesis',
+    'random:N' or a CSV/Parquet of multipliers) with noise seed ``seed``.
+
+    workers/scheduler choose the engine (a LocalCluster of ``workers`` processes, default one
+    per core; or the Dask scheduler at ``scheduler``); ``client`` reuses an existing
+    distributed.Client. ``resume=DIR`` finishes an interrupted campaign in DIR (scenario,
+    family and seed are read from it). Every user mistake is a UsageError with one line, raised
+    before anything is written."""
+    import pandas as pd
+    t_start = time.monotonic()
+    if resume:
+        info0, fam, scn, seed = _resume_inputs(resume, scenario)
+        out, family = resume, info0['family']
+    else:
+        if not scenario:
+            raise UsageError('no scenario given: expected one of '
+                             f'{", ".join(SC.available())} or a YAML path')
+        scn = SC.load(scenario)
+        if isinstance(family, dict):           # API: {column: array} of multipliers
+            fam = {c: np.asarray(family.get(c, np.ones(len(family['C_eq']))), float)
+                   for c in MULT}
+            family = 'custom'
+        else:
+            fam = FAM.resolve(family, seed)
+        out = out or default_out(scn.name, family)
+        if os.path.exists(os.path.join(out, 'campaign.json')):
+            raise UsageError(f'{out} already holds a campaign: use --resume {out} to finish it, '
+                             f'or another --out')
+    nominal = nominal_params(config_dir)
+    n = len(fam['C_eq'])
+    table = pd.DataFrame({'run_id': np.arange(n), **{c: fam[c] for c in MULT},
+                          'seed': np.full(n, int(seed))})
+    if SC.linear_columns(scn):
+        from . import linear
+        lin = linear.predict(table[list(FAM.NAMES)].to_numpy(),
+                             freqs_hz=scn.params.get('freqs', (1, 2, 4, 7, 10, 15)),
+                             stiff_freqs_hz=scn.params.get('freqs', (1, 4, 7)),
+                             load_step_n=scn.params.get('force', 5e3),
+                             plant=nominal['plant_sim'], controller=nominal['controller'])
+        for k, v in lin.items():
+            table[k] = np.asarray(v, float)
+    # the engine last: a bad scheduler address fails before anything is written
+    own = client is None
+    cluster = None
+    if own:
+        client, cluster = connect(workers, scheduler)
+    try:
+        n_workers = max(1, len(client.scheduler_info(n_workers=-1).get('workers', {})))
+        if not own:
+            scheduler = scheduler or client.scheduler.address
+        parts = os.path.join(out, 'parts')
+        os.makedirs(parts, exist_ok=True)
+        if not resume:
+            table.to_parquet(os.path.join(out, 'family.parquet'), index=False)
+        done_df, _ = read_parts(out)
+        done = set(int(i) for i in done_df['run_id']) if len(done_df) else set()
+        todo = [i for i in range(n) if i not in done]
+        info = dict(scenario=scn.as_dict(), family=family, seed=int(seed), count=n,
+                    workers=n_workers, scheduler=scheduler or 'LocalCluster',
+                    dashboard=getattr(client, 'dashboard_link', ''), complete=False)
+        _write_json(os.path.join(out, 'campaign.json'), dict(info, passed=0, failed=0))
+        label = f'campaign {scn.name}'
+        log(f'{label}: {len(todo)} of {n} runs ({family}, seed {seed}) on {n_workers} '
+            f'worker(s), {scheduler or "LocalCluster"}; dashboard {info["dashboard"]}; '
+            f'writing {out}')
+        bar = Progress(n, n - len(todo), label, progress)
+        if len(done_df):
+            bar.failed = int((~done_df['passed'].astype(bool)).sum())
+        first_row = None
+        interrupted = False
+        t_run = time.monotonic()
+        groups = chunks(todo, n_workers, chunk_size)
+        if groups:
+            from distributed import as_completed
+            scn_f, nom_f = scn.as_dict(), nominal     # small: sent with each task
+            recs = table.to_dict('records')
+            futures = {}
+            for j, g in enumerate(groups):
+                rows = [recs[i] for i in g]
+                f = client.submit(run_chunk, scn_f, nom_f, rows, trace, pure=False,
+                                  key=f'campaign-{scn.name}-{os.getpid()}-{g[0]}-'
+                                      f'{time.monotonic_ns()}', retries=1)
+                futures[f] = j
+            try:
+                for f in as_completed(list(futures)):
+                    rows, traces = f.result()
+                    _write_part(parts, rows, traces)
+                    if first_row is None:
+                        first_row = time.monotonic() - t_start
+                    bar.update(len(rows), sum(not r['passed'] for r in rows))
+            except KeyboardInterrupt:
+                interrupted = True
+                client.cancel(list(futures))
+        bar.close()
+        wall = time.monotonic() - t_start
+        df, traces = read_parts(out)
+        if len(df):
+            df = df.sort_values('run_id').reset_index(drop=True)
+        passed = int(df['passed'].astype(bool).sum()) if len(df) else 0
+        plant_s = float(df['plant_s'].sum()) if 'plant_s' in df else 0.0
+        ran = df[df['run_id'].isin(todo)] if len(df) else df
+        run_wall = time.monotonic() - t_run
+        info.update(passed=passed, failed=int(len(df) - passed), rows=int(len(df)),
+                    complete=bool(len(df) == n), wall_s=round(wall, 3),
+                    first_row_s=None if first_row is None else round(first_row, 3),
+                    plant_s=round(plant_s, 3),
+                    plant_s_per_wall_s=round(float(ran['plant_s'].sum()) / run_wall, 3)
+                    if len(ran) and 'plant_s' in ran else 0.0,
+                    errors=int((df['error'] != '').sum()) if 'error' in df else 0)
+        df.to_parquet(os.path.join(out, 'results.parquet'), index=False)
+        if traces is not None:
+            np.savez_compressed(os.path.join(out, 'traces.npz'), **traces)
+        _write_json(os.path.join(out, 'campaign.json'), info)
+        if report and len(df):
+            from .report import write_report
+            write_report(out, info, df, traces)
+        if interrupted:
+            log(f'{label}: interrupted: {len(df)} of {n} runs kept in {out}; finish with '
+                f'--resume {out}')
+            raise KeyboardInterrupt
+        return CampaignResult(out, info, df)
+    finally:
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def _resume_inputs(out: str, scenario: str | None):
+    """(info, family table, scenario, seed) of the campaign in DIR, to finish it."""
+    import pandas as pd
+    path = os.path.join(out, 'campaign.json')
+    try:
+        with open(path) as f:
+            info = json.load(f)
+        fam_df = pd.read_parquet(os.path.join(out, 'family.parquet'))
+    except (OSError, ValueError) as err:
+        raise UsageError(f'--resume {out}: not a campaign folder ({err.__class__.__name__}: '
+                         f'{str(err).splitlines()[0][:120]})')
+    scn = SC.from_dict({k: info['scenario'][k] for k in ('name', 'kind', 'description',
+                                                          'params', 'specs')}, path)
+    if scenario and scenario not in (scn.name, scn.path) and \
+            os.path.splitext(os.path.basename(scenario))[0] != scn.name:
+        raise UsageError(f'--resume {out}: that campaign ran scenario {scn.name!r}, not '
+                         f'{scenario!r}')
+    fam = {c: fam_df[c].to_numpy(float) for c in MULT}
+    return info, fam, scn, int(info['seed'])

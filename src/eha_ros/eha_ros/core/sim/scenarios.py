@@ -1,0 +1,407 @@
+"""Campaign scenarios: what one run does to the loop and which figures it yields.
+
+A scenario is a YAML file (config/campaigns/<name>.yaml; users add their own)::
+
+    name: step
+    kind: step              # one of KINDS: the signals and the figures of merit
+    description: 5 mm step from rest
+    params: {amplitude: 0.005}          # overrides of the kind's defaults (KINDS[kind])
+    specs:                              # pass/fail per figure (SI units)
+      overshoot_pct: {max: 5.0}
+      peak_deviation_m: {max_rel: {to: lin_peak_deviation_m, factor: 1.25, offset: 5.0e-5}}
+
+One run (:func:`run`) = the batch closed loop (core.batch.BatchLoop, compiled path) of the
+stack -- nonlinear plant, Kalman estimator, QFT controller, switch manager, in the stack's tick
+order -- on ONE plant variant (core.sim.family.plant_params) with one noise seed; estimator,
+controller and switch manager keep the nominal parameters they are given.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+import yaml
+
+from ..cli import UsageError
+from ..params import default_config_dir
+
+# kind -> default params (SI units). Times in s from the start of the run.
+KINDS = {
+    # 5 mm step; overshoot and 2 % settling of the truth, steady error averaged over
+    # [t_step + steady[0], t_step + steady[1]]
+    'step': dict(amplitude=5e-3, t_step=0.1, duration=1.6, band=0.02, steady=[1.0, 1.5]),
+    # load force step while holding 0 (positive F_L pushes towards negative x, eq. 3.23);
+    # peak |x| after it, mean |x| over [t_step + steady[0], t_step + steady[1]]
+    'load_step': dict(force=5e3, t_step=0.5, duration=5.0, steady=[3.5, 4.5]),
+    # stepped sine of the reference: gain and phase of truth vs reference per frequency
+    'sweep': dict(amplitude=1e-3, freqs=[1.0, 2.0, 4.0, 7.0, 10.0, 15.0], settle_periods=2,
+                  periods=6),
+    # stepped sine of the load force, reference held: |F|/|x| per frequency (Fig. 4.52)
+    'stiffness': dict(force=5e3, freqs=[1.0, 4.0, 7.0], settle_periods=2, periods=6),
+    # sine tracking: RMSE(estimate - truth) / RMSE(raw sensor - truth) over the window
+    'sine': dict(amplitude=5e-3, freq=1.0, duration=30.0, window=[6.0, 30.0]),
+    # Table 3.4: 3 Hz 3 mm sine, 10 kN load step at 1 s, commanded switch to B at 3 s
+    'switch': dict(amplitude=3e-3, freq=3.0, load=10e3, load_time=1.0, switch_time=3.0,
+                   duration=4.0),
+    # sensor fault while holding 0 (or tracking a sine): detection time of the estimator,
+    # false alarms before it
+    'sensor_fault': dict(fault='msp_bias', magnitude=1e-3, t_fault=2.0, duration=3.0,
+                         amplitude=0.0, freq=1.0),
+    # motor of the active couple fails during the Table 3.4 sine under load
+    'motor_fail': dict(amplitude=3e-3, freq=3.0, load=10e3, load_time=1.0, t_fault=2.0,
+                       duration=3.0),
+}
+SPEC_FORMS = ('max', 'min', 'max_rel')
+TRACE_POINTS = 1500          # decimated samples per trace kept for the report
+
+
+@dataclass
+class Scenario:
+    name: str
+    kind: str
+    description: str = ''
+    params: dict = field(default_factory=dict)
+    specs: dict = field(default_factory=dict)
+    path: str = ''
+
+    @property
+    def duration(self) -> float:
+        p = self.params
+        if self.kind in ('sweep', 'stiffness'):
+            return sum(segment_ticks(f, p) for f in p['freqs']) * 1e-3
+        return float(p['duration'])
+
+    def as_dict(self) -> dict:
+        return dict(name=self.name, kind=self.kind, description=self.description,
+                    params=self.params, specs=self.specs, duration=self.duration)
+
+
+def scenario_dir() -> str:
+    return os.path.join(default_config_dir(), 'campaigns')
+
+
+def available() -> list[str]:
+    d = scenario_dir()
+    out = []
+    for f in sorted(os.listdir(d)) if os.path.isdir(d) else []:
+        if f.endswith('.yaml') and not f.startswith('family'):
+            out.append(f[:-5])
+    return out
+
+
+def load(name_or_path: str) -> Scenario:
+    """A scenario by name (config/campaigns/<name>.yaml) or path; UsageError (one line) when
+    it is unknown or malformed."""
+    path = name_or_path
+    if not (os.sep in path or path.endswith('.yaml')):
+        path = os.path.join(scenario_dir(), name_or_path + '.yaml')
+        if not os.path.isfile(path):
+            raise UsageError(f'unknown scenario {name_or_path!r}: expected one of '
+                             f'{", ".join(available())} or a path to a scenario YAML')
+    try:
+        with open(path) as f:
+            doc = yaml.safe_load(f)
+    except OSError as err:
+        raise UsageError(f'scenario {path}: cannot read it: {err.strerror}')
+    except yaml.YAMLError as err:
+        raise UsageError(f'scenario {path}: malformed YAML: {str(err).splitlines()[0]}')
+    return from_dict(doc, path)
+
+
+def from_dict(doc, path: str = '<dict>') -> Scenario:
+    if not isinstance(doc, dict):
+        raise UsageError(f'scenario {path}: expected a mapping with name, kind, params, specs')
+    unknown = set(doc) - {'name', 'kind', 'description', 'params', 'specs'}
+    if unknown:
+        raise UsageError(f'scenario {path}: unknown key(s) {", ".join(sorted(unknown))} '
+                         f'(expected name, kind, description, params, specs)')
+    kind = doc.get('kind')
+    if kind not in KINDS:
+        raise UsageError(f'scenario {path}: kind {kind!r}: expected one of {", ".join(KINDS)}')
+    params = dict(KINDS[kind])
+    given = doc.get('params') or {}
+    if not isinstance(given, dict):
+        raise UsageError(f'scenario {path}: params: expected a mapping, got {given!r}')
+    for key, value in given.items():
+        if key not in params:
+            raise UsageError(f'scenario {path}: params.{key}: unknown for kind {kind} '
+                             f'(expected {", ".join(params)})')
+        default = params[key]
+        ok = (isinstance(value, str) if isinstance(default, str) else
+              isinstance(value, list) and all(_num(v) for v in value)
+              if isinstance(default, list) else _num(value))
+        if not ok:
+            raise UsageError(f'scenario {path}: params.{key} = {value!r}: expected '
+                             f'{type(default).__name__} like {default!r}')
+        params[key] = value
+    specs = doc.get('specs') or {}
+    if not isinstance(specs, dict):
+        raise UsageError(f'scenario {path}: specs: expected a mapping metric: {{max: v}}')
+    for metric, s in specs.items():
+        if not (isinstance(s, dict) and len(s) == 1 and next(iter(s)) in SPEC_FORMS):
+            raise UsageError(f'scenario {path}: specs.{metric} = {s!r}: expected {{max: v}}, '
+                             f'{{min: v}} or {{max_rel: {{to: column, factor: f, offset: o}}}}')
+        form, v = next(iter(s.items()))
+        if form == 'max_rel':
+            if not (isinstance(v, dict) and isinstance(v.get('to'), str) and
+                    _num(v.get('factor', 1.0)) and _num(v.get('offset', 0.0))):
+                raise UsageError(f'scenario {path}: specs.{metric}.max_rel = {v!r}: expected '
+                                 f'{{to: column, factor: number, offset: number}}')
+        elif not _num(v):
+            raise UsageError(f'scenario {path}: specs.{metric}.{form} = {v!r}: expected a number')
+    scn = Scenario(str(doc.get('name') or os.path.basename(path)[:-5]), kind,
+                   str(doc.get('description', '')), params, specs, path)
+    _check_signals(scn, path)
+    return scn
+
+
+def _num(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _check_signals(scn: Scenario, path: str) -> None:
+    p = scn.params
+    if scn.kind in ('sweep', 'stiffness'):
+        bad = [f for f in p['freqs'] if not 0 < f <= 50.0]
+        if bad or not p['freqs']:
+            raise UsageError(f'scenario {path}: params.freqs {p["freqs"]!r}: expected 0 < f <= '
+                             f'50 Hz (Nyquist/10 at Ts = 1 ms)')
+        if p['settle_periods'] < 1 or p['periods'] < 1:
+            raise UsageError(f'scenario {path}: settle_periods and periods: expected >= 1')
+    elif scn.duration <= 0 or scn.duration > 600:
+        raise UsageError(f'scenario {path}: params.duration {scn.duration!r}: expected 0..600 s')
+    amp = p.get('amplitude', 0.0)
+    if abs(amp) > 0.05:
+        raise UsageError(f'scenario {path}: params.amplitude {amp!r} m: beyond the stroke '
+                         f'(+-0.06 m with margin; expected |amplitude| <= 0.05)')
+
+
+# ---------------------------------------------------------------------------- signals
+def segment_ticks(f: float, p: dict) -> int:
+    """Ticks of one stepped-sine frequency: whole periods, settle + measured."""
+    return int(round((p['settle_periods'] + p['periods']) / f * 1000.0))
+
+
+def signals(scn: Scenario, Ts: float):
+    """(references, loads, faults, commands) arrays/schedules of n ticks; faults/commands as
+    time-sorted (t, payload) lists for core.redundancy.batch.schedule."""
+    p, kind = scn.params, scn.kind
+    n = int(round(scn.duration / Ts))
+    t = np.arange(n) * Ts
+    ref, load = np.zeros(n), np.zeros(n)
+    faults, commands = [], []
+    if kind == 'step':
+        ref[t >= p['t_step'] - 1e-9] = p['amplitude']
+    elif kind == 'load_step':
+        load[t >= p['t_step'] - 1e-9] = p['force']
+    elif kind in ('sweep', 'stiffness'):
+        sig = ref if kind == 'sweep' else load
+        amp = p['amplitude'] if kind == 'sweep' else p['force']
+        k = 0
+        for f in p['freqs']:
+            m = segment_ticks(f, p)
+            sig[k:k + m] = amp * np.sin(2 * np.pi * f * np.arange(m) * Ts)
+            k += m
+    elif kind == 'sine':
+        ref[:] = p['amplitude'] * np.sin(2 * np.pi * p['freq'] * t)
+    elif kind in ('switch', 'motor_fail'):
+        ref[:] = p['amplitude'] * np.sin(2 * np.pi * p['freq'] * t)
+        load[t >= p['load_time'] - 1e-9] = p['load']
+        if kind == 'switch':
+            commands.append((p['switch_time'], (1, 'campaign: commanded switch')))
+        else:
+            faults.append((p['t_fault'], ('motor_fail', 0, 0.0, 0.0)))
+    elif kind == 'sensor_fault':
+        ref[:] = p['amplitude'] * np.sin(2 * np.pi * p['freq'] * t)
+        faults.append((p['t_fault'], (p['fault'], 0, p['magnitude'], 0.0)))
+    return ref, load, faults, commands
+
+
+# ---------------------------------------------------------------------------- one run
+def build_loop(nominal: dict, plant: dict, seed: int, faults=None, commands=None):
+    """The stack's batch loop on one plant: plant from ``plant`` (the variant), estimator,
+    controller and switch manager from ``nominal`` (dicts of node parameters)."""
+    from ..batch import BatchLoop
+    from ..controller.position import PositionController
+    from ..estimator.estimator import Estimator
+    from ..plant import EhaPlant
+    from ..redundancy.state_machine import SwitchManager
+    pl = EhaPlant(plant, seed=seed)
+    pl.reset(position=plant['sim_node.initial_position'])
+    c = nominal['controller']
+    ctl = PositionController.from_params(c)
+    hold = int(round(c['control.switch_hold'] / pl.Ts))
+    return BatchLoop(pl, Estimator(nominal['estimator']), ctl,
+                     SwitchManager(nominal['switch_manager']), hold, faults, commands)
+
+
+def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int,
+        extra: dict | None = None, trace: bool = True):
+    """One run; returns (figures dict, decimated traces dict or None).
+
+    multipliers: one family row (core.sim.family.COLUMNS); extra: per-plant columns the
+    specs may refer to (e.g. lin_peak_deviation_m from core.sim.linear)."""
+    from ..closed_loop import R_ACTIVE, R_EN, R_FAULT, R_STATE, R_U, R_VALVE, R_X0, R_XHAT, R_XM
+    from ..redundancy.batch import schedule
+    from .family import plant_params
+    plant = plant_params(nominal['plant_sim'], multipliers)
+    Ts = plant['plant.sim.Ts']
+    ref, load, faults, commands = signals(scn, Ts)
+    n = len(ref)
+    loop = build_loop(nominal, plant, seed, schedule(faults, n, Ts), schedule(commands, n, Ts))
+    rec = loop.run(ref, load).T
+    t = np.arange(n) * Ts
+    sig = dict(t=t, reference=ref, load=load, truth=rec[R_X0], estimate=rec[R_XHAT],
+               measured=rec[R_XM], command=rec[R_U], fault=rec[R_FAULT],
+               active=rec[R_ACTIVE], state=rec[R_STATE], valve=rec[R_VALVE:R_VALVE + 2],
+               enable=rec[R_EN:R_EN + 2] > 0.5)
+    figs = FIGURES[scn.kind](sig, scn.params, Ts)
+    figs['max_abs_command'] = float(np.max(np.abs(rec[R_U])))
+    figs['plant_s'] = n * Ts
+    tr = None
+    if trace:
+        step = max(1, math.ceil(n / TRACE_POINTS))
+        tr = {k: np.asarray(sig[k][::step], float) for k in
+              ('t', 'reference', 'truth', 'estimate', 'measured', 'command', 'load')}
+    return figs, tr
+
+
+def judge(figs: dict, specs: dict) -> tuple[bool, str]:
+    """(passed, failed_specs): every spec met by a finite figure."""
+    failed = []
+    for metric, s in specs.items():
+        form, v = next(iter(s.items()))
+        x = figs.get(metric, math.nan)
+        if form == 'max_rel':
+            v = v.get('factor', 1.0) * figs.get(v['to'], math.nan) + v.get('offset', 0.0)
+        ok = (x <= v) if form != 'min' else (x >= v)
+        if not (isinstance(x, (int, float)) and math.isfinite(x) and math.isfinite(v) and ok):
+            failed.append(metric)
+    return not failed, ','.join(failed)
+
+
+def excess(figs: dict, specs: dict) -> tuple[float, str]:
+    """Largest normalised spec excess (x/limit - 1 for max, 1 - x/limit for min) and its
+    metric: how far the worst spec of a run is from its limit (> 0: failed)."""
+    worst, which = -math.inf, ''
+    for metric, s in specs.items():
+        form, v = next(iter(s.items()))
+        x = figs.get(metric, math.nan)
+        if form == 'max_rel':
+            v = v.get('factor', 1.0) * figs.get(v['to'], math.nan) + v.get('offset', 0.0)
+        try:
+            e = (x / v - 1.0) if form != 'min' else (1.0 - x / v)
+        except ZeroDivisionError:
+            e = math.inf if (form != 'min' and x > 0) or (form == 'min' and x < 0) else 0.0
+        e = e if math.isfinite(e) else math.inf
+        if e > worst:
+            worst, which = e, metric
+    return worst, which
+
+
+# ---------------------------------------------------------------------------- figures
+def _fhz(f: float) -> str:
+    return f'{int(f)}' if float(f).is_integer() else f'{f:g}'.replace('.', 'p')
+
+
+def step_figures(s, p, Ts):
+    """Overshoot (% of the step), 2 % settling time and steady error of the truth."""
+    t, x, a = s['t'], s['truth'], p['amplitude']
+    after = t >= p['t_step'] - 1e-9
+    y, ta = x[after], t[after] - p['t_step']
+    outside = np.nonzero(np.abs(y - a) > p['band'] * abs(a))[0]
+    win = (ta >= p['steady'][0]) & (ta <= p['steady'][1])
+    return {'overshoot_pct': float(max(0.0, np.max((y - a) * np.sign(a))) / abs(a) * 100.0),
+            'settling_s': float(ta[outside[-1]] + Ts) if len(outside) else 0.0,
+            'steady_error_m': float(abs(np.mean(y[win]) - a)),
+            'estimate_error_m': float(abs(np.mean(s['estimate'][after][win] - y[win])))}
+
+
+def load_step_figures(s, p, Ts):
+    """Peak |x| after the load step and |mean x| over the steady window (target 0)."""
+    t, x = s['t'], s['truth']
+    after = t >= p['t_step'] - 1e-9
+    ta = t[after] - p['t_step']
+    win = (ta >= p['steady'][0]) & (ta <= p['steady'][1])
+    x0 = float(np.mean(x[(t < p['t_step']) & (t >= p['t_step'] - 0.2)]))
+    return {'peak_deviation_m': float(np.max(np.abs(x[after] - x0))),
+            'steady_error_m': float(abs(np.mean(x[after][win]))),
+            'estimate_error_m': float(abs(np.mean(s['estimate'][after][win] - x[after][win])))}
+
+
+def _stepped(s, p, Ts, u_key):
+    from ..sweep.analysis import sine_point
+    out, k = [], 0
+    for f in p['freqs']:
+        m = segment_ticks(f, p)
+        u = s[u_key][k:k + m]
+        out.append((f, sine_point(u, s['truth'][k:k + m], f, Ts, int(p['settle_periods']))))
+        k += m
+    return out
+
+
+def sweep_figures(s, p, Ts):
+    """Gain (dB) and phase (deg) of truth vs reference per frequency (appendix B.2 DFT)."""
+    out = {}
+    for f, pt in _stepped(s, p, Ts, 'reference'):
+        out[f'gain_db_{_fhz(f)}hz'] = pt.gain_db
+        out[f'phase_deg_{_fhz(f)}hz'] = pt.phase_deg
+    return out
+
+
+def stiffness_figures(s, p, Ts):
+    """Dynamic stiffness |F_L|/|x| per frequency in kN/mm (Fig. 4.52)."""
+    return {f'stiffness_kn_per_mm_{_fhz(f)}hz': float(10 ** (-pt.gain_db / 20.0) / 1e6)
+            for f, pt in _stepped(s, p, Ts, 'load')}
+
+
+def sine_figures(s, p, Ts):
+    """RMSE(estimate - truth) / RMSE(raw sensor - truth) over the window; tracking RMSE."""
+    t = s['t']
+    w = (t >= p['window'][0]) & (t <= p['window'][1])
+    x = s['truth'][w]
+    e_est = np.sqrt(np.mean((s['estimate'][w] - x) ** 2))
+    e_raw = np.sqrt(np.mean((s['measured'][w] - x) ** 2))
+    return {'rmse_ratio': float(e_est / e_raw), 'estimate_rmse_m': float(e_est),
+            'tracking_rmse_m': float(np.sqrt(np.mean((x - s['reference'][w]) ** 2)))}
+
+
+def switch_figures(s, p, Ts):
+    """Table 3.4 figures of the switch (core.redundancy.batch.tracking_figures)."""
+    from ..redundancy.batch import driving_time, tracking_figures
+    f = tracking_figures(s['t'], s['truth'], s['reference'], p['switch_time'], 1.0 / p['freq'])
+    f['drive_time_s'] = driving_time(s['t'], s['valve'], s['enable'], 1, p['switch_time'])
+    f['final_channel'] = float(s['active'][-1])
+    return f
+
+
+def motor_fail_figures(s, p, Ts):
+    """Motor failure of the active couple: time until the other couple drives, tracking."""
+    from ..redundancy.batch import driving_time, tracking_figures
+    f = tracking_figures(s['t'], s['truth'], s['reference'], p['t_fault'], 1.0 / p['freq'])
+    f['drive_time_s'] = driving_time(s['t'], s['valve'], s['enable'], 1, p['t_fault'])
+    f['final_channel'] = float(s['active'][-1])
+    return f
+
+
+def sensor_fault_figures(s, p, Ts):
+    """Estimator's detection time of the injected sensor fault; false alarms before it."""
+    t, code = s['t'], s['fault']
+    before = t < p['t_fault'] - 1e-9
+    hits = np.nonzero((~before) & (code != 0))[0]
+    return {'detection_time_s': float(t[hits[0]] - p['t_fault'] + Ts) if len(hits) else math.inf,
+            'false_alarm_ticks': float(np.count_nonzero(code[before] != 0)),
+            'peak_deviation_m': float(np.max(np.abs(s['truth'][~before] -
+                                                    s['reference'][~before])))}
+
+
+FIGURES = {'step': step_figures, 'load_step': load_step_figures, 'sweep': sweep_figures,
+           'stiffness': stiffness_figures, 'sine': sine_figures, 'switch': switch_figures,
+           'sensor_fault': sensor_fault_figures, 'motor_fail': motor_fail_figures}
+
+
+def linear_columns(scn: Scenario) -> bool:
+    """Whether the scenario's report and specs use core.sim.linear predictions."""
+    return scn.kind in ('sweep', 'stiffness', 'load_step')

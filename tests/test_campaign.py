@@ -1,0 +1,321 @@
+"""Campaigns over the plant family on Dask (core.sim.campaign, scripts/campaign): families,
+figures of the scenarios, a real LocalCluster losing a worker, Ctrl-C and --resume, an
+external `dask scheduler` + `dask worker` on loopback, bad input."""
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from eha_ros.core.cli import UsageError
+from eha_ros.core.sim import campaign as C
+from eha_ros.core.sim import family as F
+from eha_ros.core.sim import scenarios as SC
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BIN = os.path.dirname(sys.executable)
+CLI = [sys.executable, '-m', 'eha_ros.tools.campaign']
+
+
+def cli(*args, timeout=300, **kw):
+    return subprocess.run(CLI + list(args), cwd=ROOT, capture_output=True, text=True,
+                          timeout=timeout, **kw)
+
+
+def small_family(n=6):
+    """n plants spread over Table 4.5 (nominal first)."""
+    t = F.thesis()
+    idx = np.linspace(0, len(t['C_eq']) - 1, n - 1).round().astype(int)
+    fam = {c: np.concatenate([[1.0], v[idx]]) for c, v in t.items()}
+    return fam
+
+
+def write_family_csv(path, fam):
+    pd.DataFrame({c: fam[c] for c in F.NAMES}).to_csv(path, index=False)
+
+
+def slow_scenario(tmp_path, seconds=20.0):
+    """A sine scenario of ``seconds`` per run: long enough to act mid-campaign."""
+    p = tmp_path / 'slow.yaml'
+    p.write_text(yaml.safe_dump({'name': 'slow', 'kind': 'sine',
+                                 'params': {'duration': seconds, 'window': [2.0, seconds]},
+                                 'specs': {'rmse_ratio': {'max': 0.5}}}))
+    return str(p)
+
+
+# --------------------------------------------------------------------------- families
+def test_thesis_family_is_the_table_4_5_grid():
+    t = F.thesis()
+    assert len(t['C_eq']) == 270
+    for name, (lo, hi, n) in {'C_eq': (0.1, 10, 5), 'D_p': (0.8, 1.0, 2), 'beta': (0.7, 1.4, 3),
+                              'k_T': (0.8, 1.2, 3), 'k_E': (0.8, 1.2, 3)}.items():
+        np.testing.assert_allclose(np.unique(t[name]), np.geomspace(lo, hi, n), rtol=1e-9)
+    assert np.all(t['friction'] == 1) and np.all(t['noise'] == 1)
+
+
+def test_random_family_is_a_seeded_latin_hypercube_beyond_the_table():
+    box = F.load_box()
+    a, b = F.random(200, 7), F.random(200, 7)
+    for c in F.COLUMNS:
+        np.testing.assert_array_equal(a[c], b[c])
+    assert not np.array_equal(a['C_eq'], F.random(200, 8)['C_eq'])
+    for name, (lo, hi, log) in box.items():
+        v = a[name]
+        assert lo <= v.min() and v.max() <= hi
+        # one sample per stratum: the Latin hypercube property
+        u = (np.log(v) - np.log(lo)) / (np.log(hi) - np.log(lo)) if log else (v - lo) / (hi - lo)
+        assert sorted(np.floor(u * 200).astype(int)) == list(range(200))
+    assert a['C_eq'].min() < 0.1 and a['C_eq'].max() > 10        # beyond Table 4.5
+
+
+def test_plant_params_of_a_variant():
+    nom = C.nominal_params()['plant_sim']
+    m = dict(C_eq=10, D_p=0.8, beta=0.7, k_T=1.2, k_E=0.8, friction=2, noise=1.5, leak_split=0.5)
+    p = F.plant_params(nom, m)
+    ceq = lambda q: q['plant.pump.C_p'] + q['plant.cylinder.C_c'] + q['plant.pump.C_r'] / 2  # noqa
+    assert ceq(p) == pytest.approx(10 * ceq(nom), rel=1e-12)          # split keeps C_eq
+    assert p['plant.pump.C_r'] == pytest.approx(10 * 0.5 * nom['plant.pump.C_r'])
+    assert p['plant.pump.D_p'] == pytest.approx(0.8 * nom['plant.pump.D_p'])
+    assert p['plant.friction.F_s'] == 2 * nom['plant.friction.F_s']
+    assert p['plant.sensors.position_sigma'] == 1.5 * nom['plant.sensors.position_sigma']
+    assert nom['plant.pump.D_p'] == C.nominal_params()['plant_sim']['plant.pump.D_p']
+
+
+def test_family_file_errors_are_one_line(tmp_path):
+    bad = tmp_path / 'bad.csv'
+    bad.write_text('C_eq,D_p,beta,k_T\n1,1,1,1\n')
+    with pytest.raises(UsageError, match='missing column.*k_E'):
+        F.from_file(str(bad))
+    bad.write_text('C_eq,D_p,beta,k_T,k_E,zeta\n1,1,1,1,1,1\n')
+    with pytest.raises(UsageError, match='unknown column.*zeta'):
+        F.from_file(str(bad))
+    bad.write_text('C_eq,D_p,beta,k_T,k_E\n1,1,nan,1,1\n')
+    with pytest.raises(UsageError, match='row 1, column beta'):
+        F.from_file(str(bad))
+    with pytest.raises(UsageError, match='random:N'):
+        F.resolve('random:x', 1)
+
+
+# --------------------------------------------------------------------------- scenarios
+def test_every_shipped_scenario_loads_and_has_specs():
+    names = SC.available()
+    for must in ('step', 'load_step', 'sweep', 'stiffness', 'sine', 'switch', 'sensor_fault',
+                 'motor_fail'):
+        assert must in names
+        scn = SC.load(must)
+        assert scn.specs and scn.duration > 0
+
+
+def test_scenario_errors_are_one_line(tmp_path):
+    with pytest.raises(UsageError, match="unknown scenario 'nope'"):
+        SC.load('nope')
+    p = tmp_path / 's.yaml'
+    p.write_text('kind: step\nparams: {amplitude: 0.2}\n')
+    with pytest.raises(UsageError, match='beyond the stroke'):
+        SC.load(str(p))
+    p.write_text('kind: step\nparams: {amplitud: 0.002}\n')
+    with pytest.raises(UsageError, match='params.amplitud: unknown'):
+        SC.load(str(p))
+    p.write_text('kind: step\nspecs: {overshoot_pct: 5}\n')
+    with pytest.raises(UsageError, match='specs.overshoot_pct'):
+        SC.load(str(p))
+    p.write_text('kind: [unclosed\n')
+    with pytest.raises(UsageError, match='malformed YAML'):
+        SC.load(str(p))
+
+
+def test_nominal_runs_give_the_stack_figures():
+    """One process, the nominal plant: the figures the stack's own tests measure."""
+    nom = C.nominal_params()
+    one = {c: 1.0 for c in F.COLUMNS}
+    figs, tr = SC.run(SC.load('step'), nom, one, 1)
+    assert figs['overshoot_pct'] < 5 and figs['settling_s'] < 0.3
+    assert figs['steady_error_m'] < 20e-6
+    assert len(tr['t']) <= SC.TRACE_POINTS + 1 and tr['truth'][-1] == pytest.approx(5e-3, abs=1e-4)
+    figs, _ = SC.run(SC.load('sweep'), nom, one, 1)
+    assert abs(figs['gain_db_1hz']) < 0.5 and -40 < figs['phase_deg_7hz'] < -10
+    figs, _ = SC.run(SC.load('stiffness'), nom, one, 1)
+    # stiffness falls with frequency (Fig. 4.52), far above 49 kN/mm at 1 Hz
+    s = [figs[f'stiffness_kn_per_mm_{f}hz'] for f in (1, 4, 7)]
+    assert s[0] > 100 and s[0] > max(s[1], s[2]) and min(s) > 20
+    figs, _ = SC.run(SC.load('switch'), nom, one, 1)
+    assert figs['final_channel'] == 1 and figs['recovery_time_s'] <= 0.05
+    figs, _ = SC.run(SC.load('sensor_fault'), nom, one, 1)
+    assert figs['detection_time_s'] <= 0.05 and figs['false_alarm_ticks'] == 0
+    figs, _ = SC.run(SC.load('motor_fail'), nom, one, 1)
+    assert figs['final_channel'] == 1 and figs['drive_time_s'] <= 0.1
+
+
+def test_a_leaky_plant_differs_from_nominal():
+    """The campaign varies the plant only: x10 leakage changes the load-step response."""
+    nom = C.nominal_params()
+    one = {c: 1.0 for c in F.COLUMNS}
+    a, _ = SC.run(SC.load('load_step'), nom, one, 1)
+    b, _ = SC.run(SC.load('load_step'), nom, dict(one, C_eq=10.0), 1)
+    assert b['peak_deviation_m'] > 1.2 * a['peak_deviation_m']
+
+
+def test_judge_and_excess():
+    specs = {'a': {'max': 1.0}, 'b': {'min': 2.0},
+             'c': {'max_rel': {'to': 'lin', 'factor': 1.25, 'offset': 0.1}}}
+    assert SC.judge({'a': 1.0, 'b': 2.0, 'c': 1.35, 'lin': 1.0}, specs) == (True, '')
+    assert SC.judge({'a': 1.1, 'b': 2.0, 'c': 1.36, 'lin': 1.0}, specs) == (False, 'a,c')
+    assert SC.judge({'a': float('nan'), 'b': 3.0, 'c': 0, 'lin': 1}, specs) == (False, 'a')
+    assert SC.excess({'a': 2.0, 'b': 2.0, 'c': 0, 'lin': 1}, specs) == (pytest.approx(1.0), 'a')
+
+
+# --------------------------------------------------------------------------- engine
+def test_chunks_are_guided_and_cover_every_run():
+    ids = list(range(270))
+    ch = C.chunks(ids, 2)
+    assert sum(ch, []) == ids
+    sizes = [len(c) for c in ch]
+    assert max(sizes) <= 8 and sizes[-1] == 1 and sizes == sorted(sizes, reverse=True)
+
+
+def test_local_cluster_loses_a_worker_and_still_delivers_every_row(tmp_path):
+    """A real LocalCluster of 2 worker processes; one is killed (SIGKILL) mid-campaign: its
+    chunk goes to the other (or the restarted) worker and every row arrives once."""
+    fam = small_family(10)
+    client, cluster = C.connect(2, None)
+    out = str(tmp_path / 'c')
+    box = {}
+    try:
+        pids = client.run(os.getpid)
+        assert len(pids) == 2
+        th = threading.Thread(target=lambda: box.update(res=C.run_campaign(
+            slow_scenario(tmp_path), fam, out=out, client=client, chunk_size=1,
+            progress=False, report=False, log=lambda s: None)))
+        th.start()
+        parts = os.path.join(out, 'parts')
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (
+                os.path.isdir(parts) and any(f.endswith('.parquet') for f in os.listdir(parts))):
+            time.sleep(0.05)
+        victim = sorted(pids.values())[0]
+        os.kill(victim, signal.SIGKILL)
+        n_at_kill = sum(f.endswith('.parquet') for f in os.listdir(parts))
+        th.join(300)
+        assert not th.is_alive()
+        assert n_at_kill < len(fam['C_eq'])           # the kill came mid-campaign
+        new = client.run(os.getpid)
+        assert victim not in new.values()             # that worker is gone (nanny restarted it)
+    finally:
+        client.close()
+        cluster.close()
+    res = box['res']
+    df = res.results
+    assert sorted(df['run_id']) == list(range(len(fam['C_eq'])))
+    assert (df['error'] == '').all()
+    assert res.info['complete'] and res.info['rows'] == len(fam['C_eq'])
+    # nominal plant first: the estimator's figure at nominal
+    assert df.loc[df['run_id'] == 0, 'rmse_ratio'].iloc[0] < 0.3
+
+
+def test_cli_ctrl_c_keeps_rows_and_resume_finishes(tmp_path):
+    fam_csv = tmp_path / 'fam.csv'
+    fam = small_family(12)
+    write_family_csv(fam_csv, fam)
+    out = tmp_path / 'c'
+    p = subprocess.Popen(CLI + [slow_scenario(tmp_path, 30.0), '--family', str(fam_csv),
+                                '--workers', '2', '--out', str(out), '--no-report'],
+                         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        parts = out / 'parts'
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (
+                parts.is_dir() and any(f.suffix == '.parquet' for f in parts.iterdir())):
+            time.sleep(0.05)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, err
+    assert 'Traceback' not in err
+    assert f'--resume {out}' in err
+    kept = pd.read_parquet(out / 'results.parquet')
+    info = json.loads((out / 'campaign.json').read_text())
+    assert 0 < len(kept) < 12 and info['complete'] is False
+    r = cli('--resume', str(out), '--workers', '2', '--no-report')
+    assert r.returncode == 0, r.stderr
+    assert f'{12 - len(kept)} of 12 runs' in r.stderr      # only the rest ran
+    df = pd.read_parquet(out / 'results.parquet')
+    assert sorted(df['run_id']) == list(range(12))
+    assert json.loads((out / 'campaign.json').read_text())['complete'] is True
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+def test_cli_on_an_external_dask_scheduler_and_worker(tmp_path):
+    """`dask scheduler` and `dask worker` as separate processes on loopback; the campaign runs
+    there with --scheduler and nothing else changed."""
+    port = _free_port()
+    addr = f'tcp://127.0.0.1:{port}'
+    env = dict(os.environ, PYTHONUNBUFFERED='1')
+    procs = [subprocess.Popen([os.path.join(BIN, 'dask'), 'scheduler', '--host', '127.0.0.1',
+                               '--port', str(port), '--dashboard-address', ':0'],
+                              cwd=str(tmp_path), env=env, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)]
+    try:
+        procs.append(subprocess.Popen([os.path.join(BIN, 'dask'), 'worker', addr,
+                                       '--nthreads', '1', '--nworkers', '2',
+                                       '--dashboard-address', ':0'],
+                                      cwd=str(tmp_path), env=env, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.DEVNULL))
+        fam_csv = tmp_path / 'fam.csv'
+        write_family_csv(fam_csv, small_family(6))
+        out = tmp_path / 'c'
+        r = cli('step', '--family', str(fam_csv), '--scheduler', addr, '--out', str(out),
+                '--no-report')
+        assert r.returncode == 0, r.stderr
+        info = json.loads((out / 'campaign.json').read_text())
+        assert info['scheduler'] == addr and info['rows'] == 6 and info['complete']
+        df = pd.read_parquet(out / 'results.parquet')
+        assert sorted(df['run_id']) == list(range(6)) and (df['error'] == '').all()
+        assert bool(df.loc[df['run_id'] == 0, 'passed'].iloc[0])      # nominal meets the step
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+@pytest.mark.parametrize('args, why', [
+    (['nope'], "unknown scenario 'nope'"),
+    (['step', '--family', 'missing.csv'], 'not found'),
+    (['step', '--family', 'random:0'], 'random:N'),
+    (['step', '--scheduler', 'tcp://127.0.0.1:1'], 'cannot connect'),
+    (['step', '--workers', '0'], 'expected at least 1'),
+])
+def test_cli_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, why):
+    out = tmp_path / 'c'
+    r = cli(*args, '--out', str(out), timeout=120)
+    assert r.returncode == 2, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and why in lines[0] and lines[0].startswith('campaign: error:')
+    assert not out.exists()
+
+
+def test_cli_malformed_family_file(tmp_path):
+    bad = tmp_path / 'f.csv'
+    bad.write_text('C_eq;D_p\n1;1\n')
+    out = tmp_path / 'c'
+    r = cli('step', '--family', str(bad), '--out', str(out), timeout=120)
+    assert r.returncode == 2 and 'family file' in r.stderr and 'Traceback' not in r.stderr
+    assert not out.exists()
