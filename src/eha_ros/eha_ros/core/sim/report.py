@@ -77,14 +77,10 @@ def fmt(name: str, value) -> str:
 
 # ------------------------------------------------------------------------------ figures of merit
 def spec_limit(row, form: str, v) -> float:
-    """The limit a spec puts on one row (max_rel: factor x row[to] + offset)."""
-    if form == 'max_rel':
-        try:
-            ref = float(row.get(v['to'], math.nan))
-        except (TypeError, ValueError):
-            ref = math.nan
-        return v.get('factor', 1.0) * ref + v.get('offset', 0.0)
-    return float(v)
+    """The limit a spec puts on one row (scenarios.limit: max_rel = factor x row[to] + offset)."""
+    from .scenarios import limit
+    figs = {k: x for k, x in row.items() if _is_number(x)}
+    return limit({form: v}, figs)[1]
 
 
 def requirement(metric: str, s: dict) -> str:

@@ -268,15 +268,22 @@ def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int,
     return figs, tr
 
 
+def limit(spec: dict, figs: dict) -> tuple[str, float]:
+    """('max' | 'min', limit) of one spec; max_rel resolves against another column of the
+    same run (factor x column + offset)."""
+    form, v = next(iter(spec.items()))
+    if form == 'max_rel':
+        return 'max', v.get('factor', 1.0) * figs.get(v['to'], math.nan) + v.get('offset', 0.0)
+    return form, float(v)
+
+
 def judge(figs: dict, specs: dict) -> tuple[bool, str]:
     """(passed, failed_specs): every spec met by a finite figure."""
     failed = []
     for metric, s in specs.items():
-        form, v = next(iter(s.items()))
+        form, v = limit(s, figs)
         x = figs.get(metric, math.nan)
-        if form == 'max_rel':
-            v = v.get('factor', 1.0) * figs.get(v['to'], math.nan) + v.get('offset', 0.0)
-        ok = (x <= v) if form != 'min' else (x >= v)
+        ok = (x <= v) if form == 'max' else (x >= v)
         if not (isinstance(x, (int, float)) and math.isfinite(x) and math.isfinite(v) and ok):
             failed.append(metric)
     return not failed, ','.join(failed)
@@ -287,14 +294,12 @@ def excess(figs: dict, specs: dict) -> tuple[float, str]:
     metric: how far the worst spec of a run is from its limit (> 0: failed)."""
     worst, which = -math.inf, ''
     for metric, s in specs.items():
-        form, v = next(iter(s.items()))
+        form, v = limit(s, figs)
         x = figs.get(metric, math.nan)
-        if form == 'max_rel':
-            v = v.get('factor', 1.0) * figs.get(v['to'], math.nan) + v.get('offset', 0.0)
         try:
-            e = (x / v - 1.0) if form != 'min' else (1.0 - x / v)
+            e = (x / v - 1.0) if form == 'max' else (1.0 - x / v)
         except ZeroDivisionError:
-            e = math.inf if (form != 'min' and x > 0) or (form == 'min' and x < 0) else 0.0
+            e = math.inf if (form == 'max' and x > 0) or (form == 'min' and x < 0) else 0.0
         e = e if math.isfinite(e) else math.inf
         if e > worst:
             worst, which = e, metric
