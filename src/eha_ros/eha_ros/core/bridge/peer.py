@@ -365,6 +365,9 @@ class AdsPeer:
 
     def start(self):
         self.running = True
+        # listen before the server thread runs: a client connecting at once queues in the
+        # backlog instead of being refused (seen on a loaded machine: ADS error 6)
+        self.server.server.listen(5)
         self.server.start()
         if not self.lockstep:
             self.thread = threading.Thread(target=self._task, name='plc_task', daemon=True)
