@@ -60,7 +60,9 @@ def test_timed_sensor_faults_and_rejections_bit_identical():
     assert events(ref) == events(fast)
     assert 'refused' in [e['kind'] for e in events(ref)]
     assert ref['responses'] == fast['responses']
-    assert 0.9 * len(ref['t']) < fast['fast_ticks'] < len(ref['t'])
+    # the estimator isolates the position sensor while it reports a jump or a stuck sensor
+    # (estimator.fault.isolate): those ticks (msp_noise, msp_drift + hold) run in Python
+    assert 0.4 * len(ref['t']) < fast['fast_ticks'] < len(ref['t'])
 
 
 def test_without_estimator_bit_identical():

@@ -143,9 +143,9 @@ def test_nominal_runs_give_the_stack_figures():
     figs, _ = SC.run(SC.load('sweep'), nom, one, 1)
     assert abs(figs['gain_db_1hz']) < 0.5 and -40 < figs['phase_deg_7hz'] < -10
     figs, _ = SC.run(SC.load('stiffness'), nom, one, 1)
-    # stiffness falls with frequency (Fig. 4.52), far above 49 kN/mm at 1 Hz
+    # the M(s) bound of eq. 4.60 (49 kN/mm up to 7 Hz) holds on the nominal plant
     s = [figs[f'stiffness_kn_per_mm_{f}hz'] for f in (1, 4, 7)]
-    assert s[0] > 100 and s[0] > max(s[1], s[2]) and min(s) > 20
+    assert min(s) >= 49.0
     figs, _ = SC.run(SC.load('switch'), nom, one, 1)
     assert figs['final_channel'] == 1 and figs['recovery_time_s'] <= 0.05
     figs, _ = SC.run(SC.load('sensor_fault'), nom, one, 1)

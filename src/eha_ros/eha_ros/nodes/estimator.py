@@ -36,6 +36,7 @@ def make_node(params: dict):
             self.loop = LoopStats(self.est.Ts)
             self.last_arrival = None
             self.last_seq = None
+            self.verdict = 0                  # core.estimator.adapt verdict last logged
             self.stale = False
             self.stale_seq = 0
             self.msg = PositionEstimate()
@@ -82,6 +83,8 @@ def make_node(params: dict):
             r = self.est.update(msg.position, msg.motor_speed, msg.pressure_a, msg.pressure_b,
                                 msg.active_channel, ticks)
             self.c.bump('estimates')
+            if r.consistency != self.verdict:      # one log line per verdict change (issue 15)
+                self.on_verdict(r.consistency, msg.seq)
             if r.rejected:
                 self.c.bump('rejected_states')
                 self.get_logger().warning(
@@ -90,6 +93,19 @@ def make_node(params: dict):
                     throttle_duration_sec=1.0)
             self.publish(r, msg.header.stamp, msg.seq, False)
             self.loop.executed(time.perf_counter() - t0)
+
+        def on_verdict(self, verdict: int, seq: int):
+            from ..core.estimator import adapt
+            self.verdict = verdict
+            name = adapt.VERDICTS[verdict]
+            if adapt.safe_state(verdict):
+                self.get_logger().error(f'seq {seq}: {name}: filter and position sensor disagree '
+                                        f'beyond the sensor band (safe state required)')
+            elif verdict == adapt.MODEL:
+                self.get_logger().warning(f'seq {seq}: model_mismatch (adaptive model at its '
+                                          f'bound or persistent innovation bias)')
+            else:
+                self.get_logger().info(f'seq {seq}: consistency ok')
 
         def on_timer(self):
             if self.last_arrival is None:
@@ -136,9 +152,19 @@ def make_node(params: dict):
             alphas = self.est.friction_alphas
             if alphas is not None:
                 values.update(alpha_1=alphas[0], alpha_2=alphas[1], alpha_3=alphas[2])
+            from ..core.estimator import adapt
+            values['consistency'] = adapt.VERDICTS[self.est.consistency]
+            values['safe_state_required'] = self.est.safe_state_required
+            kf = self.est.kf
+            for name in ('leakage', 'displacement', 'compliance'):
+                if hasattr(kf, f'{name}_correction'):
+                    values[f'{name}_correction'] = getattr(kf, f'{name}_correction')
             bad = self.stale or self.est.detector.code or self.c.get('rejected_states', 0)
             level = diag.WARN if bad else diag.OK
             msg = 'ok' if level == diag.OK else 'stale, sensor fault or measurements rejected'
+            if self.est.safe_state_required:
+                level = diag.ERROR
+                msg = f'{values["consistency"]}: filter and sensor disagree beyond the band'
             diag.publish(self, self.pub_diag, f'filter {self.get_namespace()}', values, level, msg)
 
     return EstimatorNode()

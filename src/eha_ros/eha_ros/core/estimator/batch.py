@@ -26,6 +26,7 @@ class Run:
     nis_dim: np.ndarray
     fault: np.ndarray        # sensor_fault codes
     skipped: np.ndarray      # bool
+    consistency: np.ndarray  # adapt verdicts (OK, MODEL, DISAGREE, SENSOR)
 
 
 def closed_loop(params: dict, reference, duration: float, seed: int = 1,
@@ -43,6 +44,7 @@ def closed_loop(params: dict, reference, duration: float, seed: int = 1,
     nis_dim = np.zeros(n, int)
     fault = np.zeros(n, int)
     skipped = np.zeros(n, bool)
+    verdict = np.zeros(n, int)
     pending = sorted(faults)
     u = 0.0
     for k in range(n):
@@ -64,7 +66,8 @@ def closed_loop(params: dict, reference, duration: float, seed: int = 1,
         nis_dim[k] = r.nis_dim
         fault[k] = r.sensor_fault
         skipped[k] = r.update_skipped
-    return Run(t, ref, nis_dim=nis_dim, fault=fault, skipped=skipped, **cols)
+        verdict[k] = r.consistency
+    return Run(t, ref, nis_dim=nis_dim, fault=fault, skipped=skipped, consistency=verdict, **cols)
 
 
 def plant_v_index() -> int:

@@ -26,7 +26,10 @@ flow line crosses zero. The valve state is taken from the prior pressure estimat
 p_c, where the linear flow is an inflow (a threshold at the cracking pressure would let the
 line's reverse flow between p_c and p_acc - crack hold a free chamber on its valve); the
 four (F, G) pairs are ZOH-discretised once. Optional states as in
-:class:`~.model_kf.ModelKF`: the sensor's Gauss-Markov offset b and an external force F_d.
+:class:`~.model_kf.ModelKF`: the sensor's Gauss-Markov offset b and an external force F_d;
+and the adaptive relative leakage, displacement and compliance corrections lambda, delta,
+kappa, an EKF with the leakage Jacobian, with the estimate projection of :mod:`.adapt`
+(issue 15: the loop must hold on every plant of Table 4.5).
 """
 from __future__ import annotations
 
@@ -34,8 +37,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import expm
 
-from . import kernels
+from . import adapt, kernels
 from .model_kf import MeasuredKF, friction_estimate, zoh
 
 
@@ -85,6 +89,24 @@ def continuous(c: Circuit, s_a: bool, s_b: bool, gm_corner_hz: float | None = No
     return A, B
 
 
+def leak_sensitivity(c: Circuit, A: np.ndarray, Ts: float, n: int) -> np.ndarray:
+    """d expm((A + s A_L) Ts)/ds at s = 0 (n x n, zero outside the linear block): A_L the
+    leakage part of the chamber rows (C_x, C_r), so lambda D is the first-order change of the
+    ZOH F when every leakage is (1 + lambda) times nominal (block-triangular expm, Van Loan)."""
+    m = A.shape[0]
+    k = c.beta / c.V_d
+    AL = np.zeros((m, m))
+    for i in (2, 3):
+        AL[i, i] = -k * (c.C_x + c.C_r)
+        AL[i, 5 - i] = k * c.C_x
+    M = np.zeros((2 * m, 2 * m))
+    M[:m, :m] = M[m:, m:] = A * Ts
+    M[:m, m:] = AL * Ts
+    out = np.zeros((n, n))
+    out[:m, :m] = expm(M)[:m, m:]
+    return out
+
+
 class ChamberKF(MeasuredKF):
     """Discrete Kalman filter of the chamber model (predict eq. 4.1-4.2, Joseph update
     eq. 4.4-4.6), measurements position (+ b) and, when given, p_A and p_B.
@@ -97,13 +119,23 @@ class ChamberKF(MeasuredKF):
 
     def __init__(self, c: Circuit, Ts: float, q_diag, p0_diag, R_pos: float,
                  R_p: float | None = None, gm: tuple | None = None, F_s: float = 800.0,
-                 v_eps: float = 3e-3, q_load: float | None = None, p0_load: float = 1e8):
+                 v_eps: float = 3e-3, q_load: float | None = None, p0_load: float = 1e8,
+                 leakage: tuple | None = None, displacement: tuple | None = None,
+                 compliance: tuple | None = None, offset_bound: float = 0.0,
+                 adapt_gate: float = 0.0, compliance_alpha: float = 1.0,
+                 leakage_excitation: float = 0.0):
+        """``leakage``/``displacement``/``compliance``: (q per step, p0, lo, hi) of the relative
+        corrections lambda/delta/kappa (:mod:`.adapt`), None: not a state; ``offset_bound``
+        [m]: projection bound of the sensor offset b (0: none); ``adapt_gate``: no update of
+        lambda, delta, kappa from a sample whose normalised position innovation exceeds it (0:
+        always); ``compliance_alpha``: per-tick low-pass weight of kappa's pressure
+        increments; ``leakage_excitation`` [Pa]: lambda is not updated while |p_A - p_B| is
+        below it (adapt.leakage_unexcited)."""
         self.c, self.Ts, self.F_s, self.v_eps = c, Ts, F_s, v_eps
         self.friction_uses_pressure = False
         corner = None if gm is None else gm[1]
         n_lin = 4 if gm is None else 5
-        n = n_lin + (q_load is not None)
-        self.n, self._n_lin = n, n_lin
+        self._n_lin = n_lin
         q = list(q_diag)[:3] + [list(q_diag)[2]]
         p0 = list(p0_diag)[:3] + [list(p0_diag)[2]]
         if gm is not None:
@@ -117,8 +149,29 @@ class ChamberKF(MeasuredKF):
             self.i_load = len(q)
             q.append(q_load)
             p0.append(p0_load)
+        self.i_lam = self.i_del = self.i_kap = -1
+        self.lam_range = self.del_range = self.kap_range = (0.0, 0.0)
+        self.c_Ts = c.V_d / (c.beta * Ts)
+        for name, spec in (('lam', leakage), ('del', displacement), ('kap', compliance)):
+            if spec is not None:
+                setattr(self, 'i_' + name, len(q))
+                setattr(self, name + '_range', (float(spec[2]), float(spec[3])))
+                q.append(spec[0])
+                p0.append(spec[1])
+        n = len(q)
+        self.n = n
+        self.i_gm = 4 if gm is not None else -1
+        self.offset_bound = float(offset_bound)
+        self.edge = 0                               # adaptive states on a bound (last update)
+        params = [i for i in (self.i_lam, self.i_del, self.i_kap) if i >= 0]
+        self.i_frozen = min(params) if params else n     # the adaptive states are the last
+        self.adapt_gate = float(adapt_gate)
+        self.alpha_dp = float(compliance_alpha)     # low-pass of the compliance flow's input
+        self.p_excite = float(leakage_excitation)
         # (F, G) per check-valve state, index 2 s_a + s_b
         self.modes = []
+        L = []                                      # ZOH columns of a unit flow into A, B
+        D = []                                      # leakage sensitivity of the ZOH F
         for s_a in (False, True):
             for s_b in (False, True):
                 A, B = continuous(c, s_a, s_b, corner)
@@ -130,6 +183,15 @@ class ChamberKF(MeasuredKF):
                 if self.i_load is not None:
                     F[:n_lin, self.i_load] = Gl[:, 1]     # F_d held over Ts like F_L
                 self.modes.append((F, G))
+                Bq = np.zeros((n_lin, 2))
+                Bq[2, 0] = Bq[3, 1] = c.beta / c.V_d
+                Lq = np.zeros((n, 2))
+                Lq[:n_lin] = zoh(A, Bq, Ts)[1]
+                L.append(Lq)
+                D.append(leak_sensitivity(c, A, Ts, n))
+        self.Lm = np.vstack(L)                      # (4 n, 2), rows of mode m at m n
+        self.Dm = np.vstack(D)                      # (4 n, n)
+        self._Fj = np.zeros((n, n))
         self.F, self.G = self.modes[0]
         self.mode = 0
         self.Q = np.diag(np.asarray(q, float))
@@ -146,6 +208,9 @@ class ChamberKF(MeasuredKF):
         self.x[2] = self.c.p_acc if p_a is None else p_a
         self.x[3] = self.c.p_acc if p_b is None else p_b
         self.P = self.P0.copy()
+        self.clipped = np.zeros(1)                  # adapt.project: clipping updates in a row
+        self.p_last = np.zeros(4)                   # adapt.pressure_increments
+        self.p_last[:2] = self.x[2:4]
 
     def valve_mode(self) -> int:
         """Index into :attr:`modes` of the check-valve state the prior pressures give:
@@ -165,7 +230,52 @@ class ChamberKF(MeasuredKF):
                                       self.c.A_p, self.c.D_p, self.F_s, self.v_eps)
         self.mode = self.valve_mode()
         self.F, self.G = self.modes[self.mode]
-        kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
+        if self.adaptive:
+            c, x, pl = self.c, self.x, self.p_last
+            adapt.pressure_increments(pl, x[2], x[3], self.alpha_dp)
+            adapt.parameter_columns(self.F, self.Lm, self.mode * self.n, 0, self._n_lin,
+                                    self.i_lam, self.i_del, self.i_kap, x[2], x[3], pl[2],
+                                    pl[3], omega, c.C_x, c.C_r, c.p_acc, c.D_p, self.c_Ts)
+        if self.i_lam >= 0:
+            adapt.predict_jacobian(self.x, self.P, self.F, self._Fj, self.Dm, self.mode * self.n,
+                                   0, self._n_lin, self.x[self.i_lam], self.G, self.u, self.Q,
+                                   self._tmp)
+        else:
+            kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
+
+    def update(self, z_pos: float, p_a: float | None = None, p_b: float | None = None):
+        """MeasuredKF.update, then the estimate projection of :func:`.adapt.project`."""
+        out = super().update(z_pos, p_a, p_b)
+        self.project()
+        return out
+
+    def unexcited(self) -> int:
+        return adapt.leakage_unexcited(self.x, self.i_lam, self.p_excite)
+
+    def project(self) -> int:
+        self.edge = adapt.project(self.x, self.i_lam, *self.lam_range, self.i_del,
+                                  *self.del_range, self.i_kap, *self.kap_range, self.i_gm,
+                                  self.offset_bound, self.clipped, adapt.EDGE_TICKS)
+        return self.edge
+
+    @property
+    def adaptive(self) -> bool:
+        return self.i_lam >= 0 or self.i_del >= 0 or self.i_kap >= 0
+
+    @property
+    def leakage_correction(self) -> float:
+        """Estimated relative leakage correction lambda (plant leakage / nominal - 1)."""
+        return float(self.x[self.i_lam]) if self.i_lam >= 0 else 0.0
+
+    @property
+    def compliance_correction(self) -> float:
+        """Estimated relative compliance correction kappa (beta nominal / beta - 1)."""
+        return float(self.x[self.i_kap]) if self.i_kap >= 0 else 0.0
+
+    @property
+    def displacement_correction(self) -> float:
+        """Estimated relative displacement correction delta (D_p / nominal - 1)."""
+        return float(self.x[self.i_del]) if self.i_del >= 0 else 0.0
 
     def pressure_z(self, p_a: float, p_b: float) -> tuple:
         return (p_a, p_b)

@@ -15,6 +15,9 @@ from dataclasses import dataclass
 
 from ..plant.parameters import PlantParams
 from ..stats import Counters
+import numpy as np
+
+from . import adapt
 from . import fault_detector as fd
 from . import kernels
 from .chamber_kf import ChamberKF, Circuit
@@ -36,6 +39,7 @@ class EstimateResult:
     sensor_fault: int
     rejected: str = ''             # reasons, comma separated ('' when all was used)
     nis_dim: int = 0               # measurement dimension behind nis (0: no update)
+    consistency: int = 0           # adapt.OK / MODEL / SENSOR / DISAGREE (adapt.VERDICTS)
 
 
 def hydromech(pp: PlantParams, leakage: str) -> HydroMech:
@@ -70,11 +74,26 @@ def build_filter(p: dict):
     with_p = p[e + 'measurements'] == 'position_pressure'
     if p[e + 'model.structure'] == 'chambers':
         q = list(p[e + 'model.q'][:2]) + [p[e + 'model.q_chamber']]
+        m = e + 'model.'
+        # the adaptive flow parameters need the measured pressures (the flow balance): none
+        # with position-only measurements, where they are unobservable
+        lam = ((p[m + 'q_leakage'], p[m + 'p0_leakage'], *p[m + 'leakage_range'])
+               if p[m + 'adapt_leakage'] and with_p else None)
+        dlt = ((p[m + 'q_displacement'], p[m + 'p0_displacement'],
+                *p[m + 'displacement_range']) if p[m + 'adapt_displacement'] and with_p
+               else None)
+        kap = ((p[m + 'q_compliance'], p[m + 'p0_compliance'], *p[m + 'compliance_range'])
+               if p[m + 'adapt_compliance'] and with_p else None)
         kf = ChamberKF(circuit(pp), pp.Ts, q, p[e + 'model.p0'], R_pos,
                        p[e + 'noise.pressure_sigma'] ** 2 if with_p else None, gm,
                        F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
                        q_load=p[e + 'model.q_load'] if p[e + 'model.load_state'] else None,
-                       p0_load=p[e + 'model.p0_load'])
+                       p0_load=p[e + 'model.p0_load'], leakage=lam, displacement=dlt,
+                       compliance=kap, adapt_gate=p[m + 'adapt_gate'],
+                       leakage_excitation=p[m + 'leakage_excitation'],
+                       compliance_alpha=(adapt.lowpass_alpha(p[m + 'compliance_lowpass'], pp.Ts)
+                                         if p[m + 'compliance_lowpass'] > 0 else 1.0),
+                       offset_bound=p[m + 'offset_bound'] if gm else 0.0)
         kf.friction_uses_pressure = p[e + 'model.friction_pressure']
         return kf
     h = hydromech(pp, p[e + 'model.pd_leakage'])
@@ -113,6 +132,19 @@ class Estimator:
         fc = params[e + 'model.friction_lowpass']
         self.alpha_wf = 1.0 - math.exp(-2.0 * math.pi * fc * self.Ts) if fc > 0 else 1.0
         self.detector = fd.FaultDetector.from_params(params, self.Ts)
+        mk = np.zeros(adapt.NMK)                   # consistency monitor (adapt.monitor)
+        mk[adapt.MK_ALPHA] = adapt.lowpass_alpha(params[e + 'monitor.lowpass'], self.Ts)
+        mk[adapt.MK_BAND] = params[e + 'monitor.band']
+        mk[adapt.MK_N] = params[e + 'monitor.debounce']
+        mk[adapt.MK_HOLD] = int(round(params[e + 'monitor.hold_time'] / self.Ts))
+        self.monitor_k = mk
+        m = e + 'model.'
+        self.i_load = -1 if not self.is_model or self.kf.i_load is None else self.kf.i_load
+        self.q_load, self.q_load_jump = params[m + 'q_load'], params[m + 'q_load_jump']
+        self.load_jump_z = params[m + 'load_jump_z']
+        self.q_x, self.q_x_disagree = params[m + 'q'][0], params[m + 'q_x_disagree']
+        self.b_dis = params[e + 'noise.position_gm_sigma']
+        self.monitor_s = np.zeros(adapt.NMS)
         self.chinniah = None
         if params[e + 'chinniah.enabled']:
             from .chinniah import Chinniah3, Chinniah4
@@ -129,6 +161,7 @@ class Estimator:
         self.pd_meas = 0.0          # last good measured p_D
         self.pd_filt = 0.0          # its low-pass (model input)
         self.detector.reset()
+        self.monitor_s[:] = 0.0
         self.updates = 0
 
     # ------------------------------------------------------------------ checks
@@ -158,7 +191,9 @@ class Estimator:
         Predict-only (stale) steps taken since the previous state are provisional: they are
         undone here and replaced by exactly ``ticks`` predictions."""
         if self._saved is not None:
-            self.kf.x[:], self.kf.P[:], self.omega_prev, self.w_fric = self._saved
+            self.kf.x[:], self.kf.P[:], self.omega_prev, self.w_fric, p_last = self._saved
+            if p_last is not None:
+                self.kf.p_last[:] = p_last
             self._saved = None
         position = float(position)
         pressure_a, pressure_b = float(pressure_a), float(pressure_b)
@@ -193,29 +228,60 @@ class Estimator:
             self.detector.tick_without_sample()
             self.counters.bump('skipped_updates')
             return self._result(0.0, 0.0, True, ','.join(reasons), 0)
-        if self.isolate and fault_before != fd.NONE:
+        if self.isolate and fault_before in (fd.JUMP, fd.STUCK):
             # sensor reported faulty: predict only, but keep watching its innovation
             self.counters.bump('skipped_updates')
             self.counters.bump('isolated_updates')
             reasons.append('sensor_fault')
             y, S = self.kf.innovation_only(position)
+            if pr_ok and self.use_pressure:
+                self.kf.update_pressures(pressure_a, pressure_b)   # the pressures still count
             self.detector.update(position, y, S)
+            self._monitor(position)
             return self._result(y, y * y / S, True, ','.join(reasons), 0)
         y, S, nis, m = self.kf.update(position, *((pressure_a, pressure_b)
                                                   if pr_ok and self.use_pressure else ()))
         self.updates += 1
-        self.detector.update(position, y, S)
+        pz = fd.pressure_z(self.kf.y, self.kf.S, m) if m > 1 else 0.0
+        self.detector.update(position, y, S, pz)
+        if self.chambers:
+            adapt.maneuver(self.kf.Q, self.i_load, pz, self.load_jump_z, self.q_load,
+                           self.q_load_jump)
+        self._monitor(position)
         if self.chinniah is not None and pr_ok:
             self._chinniah_step(position)
         return self._result(y, nis, False, ','.join(reasons), m)
+
+    def _monitor(self, position: float) -> int:
+        """Consistency verdict of this update (adapt.monitor); the chamber filter's position
+        noise follows the disagreement (adapt.disagree_noise)."""
+        d = self.detector
+        v = adapt.monitor(self.monitor_k, self.monitor_s, position, self.kf.position,
+                          d.code, d.code == fd.DRIFT, getattr(self.kf, 'edge', 0))
+        if self.chambers:
+            adapt.disagree_noise(self.kf.Q, self.kf.x, self.kf.i_gm, self.b_dis, self.monitor_k,
+                                 self.monitor_s, self.kf.edge, self.q_x, self.q_x_disagree)
+        return v
+
+    @property
+    def consistency(self) -> int:
+        """Latest verdict: adapt.OK, MODEL, SENSOR or DISAGREE (names: adapt.VERDICTS)."""
+        return int(self.monitor_s[adapt.MS_VERDICT])
+
+    @property
+    def safe_state_required(self) -> bool:
+        """Filter and sensor disagree beyond the sensor's band, or the sensor is faulty: the
+        nodes' cue for the safe state (adapt.monitor, adapt.safe_state)."""
+        return adapt.safe_state(self.consistency)
 
     def predict_only(self) -> EstimateResult:
         """A tick without a state (stale): predict with the last good speed (provisional,
         see :meth:`update`)."""
         if self.started:
             if self._saved is None:
+                p_last = getattr(self.kf, 'p_last', None)
                 self._saved = (self.kf.x.copy(), self.kf.P.copy(), self.omega_prev,
-                               self.w_fric)
+                               self.w_fric, None if p_last is None else p_last.copy())
             self._predict(self.omega_prev)
         self.detector.tick_without_sample()
         return self._result(0.0, 0.0, True, 'stale', 0)
@@ -238,7 +304,7 @@ class Estimator:
         kf = self.kf
         pd = kf.pressure_diff if self.is_model else self.pd_meas
         return EstimateResult(kf.position, kf.velocity, pd, kf.position_variance, innovation,
-                              nis, skipped, self.detector.code, rejected, m)
+                              nis, skipped, self.detector.code, rejected, m, self.consistency)
 
     @property
     def friction_alphas(self):

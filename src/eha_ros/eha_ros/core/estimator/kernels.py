@@ -8,6 +8,8 @@ the reference in the tests.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -73,6 +75,18 @@ def update(x, P, H, R, z, y, S):
 @njit(cache=True)
 def update_ws(x, P, H, R, z, y, S, ws):
     """:func:`update` with preallocated scratch ``ws`` (>= workspace_size(n, m) floats)."""
+    return update_gated(x, P, H, R, z, y, S, ws, x.shape[0], 0.0, -1)
+
+
+@njit(cache=True)
+def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_unexcited):
+    """:func:`update_ws`; when any innovation's |y_j| / sqrt(S_jj) exceeds ``gate`` (> 0),
+    the gain rows of the states i_frozen .. n-1 are zeroed: those states are not
+    updated by this sample, their covariance stays consistent (the Joseph form holds for any
+    gain). Used to keep slow parameter states out of a fast transient the model cannot
+    explain (core.estimator.adapt). The gain row of state ``i_unexcited`` (>= 0) is zeroed
+    always: a parameter whose regressor is too small to tell it from model error (dead-zone
+    adaptation, Ioannou & Sun, "Robust Adaptive Control", 1996, sec. 8.5)."""
     n = x.shape[0]
     m = z.shape[0]
     o = 0
@@ -92,6 +106,18 @@ def update_ws(x, P, H, R, z, y, S, ws):
     mul(H, PHt, S, R, False, False, False)     # S = R + H P H'
     Si = np.linalg.inv(S)
     mul(PHt, Si, K, None, False, False, False)
+    if i_unexcited >= 0:
+        for j in range(m):
+            K[i_unexcited, j] = 0.0
+    if gate > 0.0 and i_frozen < n:
+        outlier = False
+        for j in range(m):
+            if abs(y[j]) > gate * math.sqrt(S[j, j]):
+                outlier = True
+        if outlier:
+            for i in range(i_frozen, n):
+                for j in range(m):
+                    K[i, j] = 0.0
     nis = 0.0
     for i in range(m):
         for j in range(m):

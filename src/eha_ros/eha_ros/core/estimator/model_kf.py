@@ -135,7 +135,9 @@ class MeasuredKF(kernels.StateView):
             self.H[r, i] = 1.0
         self.R = np.diag(np.asarray([R_pos] + [R_p] * len(rows), float))
         self.H1, self.R1 = self.H[:1].copy(), self.R[:1, :1].copy()
+        self.Hp, self.Rp = self.H[1:].copy(), self.R[1:, 1:].copy()    # pressures only
         self._tmp = np.empty((n, n))
+        self._ws = np.empty(kernels.workspace_size(n, 3))
         self.y = np.zeros(m)
         self.S = np.zeros((m, m))
         self._y1, self._S1 = np.zeros(1), np.zeros((1, 1))
@@ -144,13 +146,32 @@ class MeasuredKF(kernels.StateView):
         """Measurement update (eq. 4.4-4.6, Joseph form) with the position, and the
         pressures when configured and given. Returns (position innovation, its variance S_00,
         NIS of the whole measurement, measurement dimension)."""
+        f0, gate = getattr(self, 'i_frozen', self.n), getattr(self, 'adapt_gate', 0.0)
+        iu = self.unexcited()
         if self.with_pressure and p_a is not None:
             z = np.array((z_pos,) + self.pressure_z(p_a, p_b))
-            nis = kernels.update(self.x, self.P, self.H, self.R, z, self.y, self.S)
+            nis = kernels.update_gated(self.x, self.P, self.H, self.R, z, self.y, self.S,
+                                       self._ws, f0, gate, iu)
             return float(self.y[0]), float(self.S[0, 0]), float(nis), len(z)
-        nis = kernels.update(self.x, self.P, self.H1, self.R1, np.array((z_pos,)), self._y1,
-                             self._S1)
+        nis = kernels.update_gated(self.x, self.P, self.H1, self.R1, np.array((z_pos,)),
+                                   self._y1, self._S1, self._ws, f0, gate, iu)
         return float(self._y1[0]), float(self._S1[0, 0]), float(nis), 1
+
+    def unexcited(self) -> int:
+        """Index of a parameter state not to update this sample (-1: none)."""
+        return -1
+
+    def update_pressures(self, p_a: float, p_b: float) -> float:
+        """Update with the pressures alone (the position sensor isolated: its sample is not
+        used, but the pressures still hold the hydraulic states); returns the NIS."""
+        if not self.with_pressure:
+            return 0.0
+        z = np.array(self.pressure_z(p_a, p_b))
+        m = len(z)
+        y, S = np.zeros(m), np.zeros((m, m))
+        return float(kernels.update_gated(self.x, self.P, self.Hp, self.Rp, z, y, S, self._ws,
+                                          getattr(self, 'i_frozen', self.n), 0.0,
+                                          self.unexcited()))
 
     def innovation_only(self, z_pos: float):
         """Position innovation and its variance without updating (for a rejected sample)."""

@@ -14,8 +14,9 @@ import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
+from . import adapt
 from . import fault_detector as fd
-from .kernels import predict, update_ws, workspace_size
+from .kernels import predict, update_gated, workspace_size
 
 drop_stale(__file__)
 
@@ -26,7 +27,15 @@ K_AP, K_DP, K_FS, K_VEPS, K_ISOLATE = 10, 11, 12, 13, 14
 K_JUMP, K_JUMP_N, K_STUCK_N, K_STUCK_TOL, K_DRIFT_K, K_DRIFT_H, K_DRIFT_N, K_HOLD = \
     15, 16, 17, 18, 19, 20, 21, 22
 K_CHAMBERS, K_PC, K_ALPHA_WF = 23, 24, 25
-NK = 26
+K_CX, K_CR, K_PACC, K_ILAM, K_IDEL, K_LAMLO, K_LAMHI, K_DELLO, K_DELHI, K_IGM, K_BMAX = \
+    26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36
+K_IKAP, K_KAPLO, K_KAPHI, K_CTS = 37, 38, 39, 40
+K_JUMP_STEP, K_JUMP_PVETO = 41, 42
+K_IFROZEN, K_GATE = 43, 44
+K_ILOAD, K_QLOAD, K_QLOADJ, K_LOADZ, K_ALPHA_DP = 45, 46, 47, 48, 49
+K_QX, K_QXD, K_BDIS, K_PEXC = 50, 51, 52, 53
+K_MON = 54             # adapt.NMK entries: the consistency monitor's constants
+NK = K_MON + adapt.NMK
 # state
 E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
 E_NJUMP, E_NSAME, E_NDRIFT, E_GPOS, E_GNEG, E_ZPREV, E_HAS_ZPREV = 4, 5, 6, 7, 8, 9, 10
@@ -35,7 +44,12 @@ E_DET = 14             # 3 entries
 E_CODE = 17
 E_MODE = 18            # check-valve state of the chamber filter
 E_WFRIC = 19           # low-passed pump speed (friction sign)
-NE = 20
+E_EDGE = 20            # adaptive states on a bound after the last update
+E_PLAST = 21           # 4 entries: chamber filter's adapt.pressure_increments state
+E_YPREV, E_STEPPED = 25, 26   # fault detector: last innovation, run began with a step
+E_CLIPPED = 27         # chamber filter: updates in a row that clipped a parameter
+E_MON = 28             # adapt.NMS entries: the consistency monitor's state
+NE = E_MON + adapt.NMS
 CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
 
 
@@ -48,6 +62,7 @@ def pack(est):
     """(constants, state, arrays) of an Estimator; arrays are the filter's own."""
     kf, d = est.kf, est.detector
     k = np.zeros(NK)
+    e = np.zeros(NE)
     k[K_XMAX], k[K_PMIN], k[K_PMAX], k[K_WMAX] = est.x_max, est.p_min, est.p_max, est.w_max
     k[K_ALPHA_PD], k[K_ALPHA_WF] = est.alpha_pd, est.alpha_wf
     k[K_MODEL] = est.is_model
@@ -61,13 +76,30 @@ def pack(est):
         c = kf.c if est.chambers else kf.h
         k[K_AP], k[K_DP], k[K_FS], k[K_VEPS] = c.A_p, c.D_p, kf.F_s, kf.v_eps
     k[K_CHAMBERS] = est.chambers
+    k[K_ILAM] = k[K_IDEL] = k[K_IKAP] = k[K_IGM] = -1.0
     if est.chambers:
         k[K_PC] = kf.c.p_c
+        k[K_CX], k[K_CR], k[K_PACC] = kf.c.C_x, kf.c.C_r, kf.c.p_acc
+        k[K_ILAM], k[K_IDEL], k[K_IGM], k[K_BMAX] = kf.i_lam, kf.i_del, kf.i_gm, kf.offset_bound
+        (k[K_LAMLO], k[K_LAMHI]), (k[K_DELLO], k[K_DELHI]) = kf.lam_range, kf.del_range
+        k[K_IKAP], (k[K_KAPLO], k[K_KAPHI]), k[K_CTS] = kf.i_kap, kf.kap_range, kf.c_Ts
+        e[E_EDGE] = kf.edge
+        k[K_IFROZEN], k[K_GATE] = kf.i_frozen, kf.adapt_gate
+        k[K_PEXC] = kf.p_excite
+        e[E_PLAST:E_PLAST + 4] = kf.p_last
+        e[E_CLIPPED] = kf.clipped[0]
+        k[K_ALPHA_DP] = kf.alpha_dp
+    k[K_ILOAD], k[K_QLOAD], k[K_QLOADJ], k[K_LOADZ] = (est.i_load, est.q_load,
+                                                      est.q_load_jump, est.load_jump_z)
+    k[K_QX], k[K_QXD], k[K_BDIS] = est.q_x, est.q_x_disagree, est.b_dis
+    k[K_MON:K_MON + adapt.NMK] = est.monitor_k
+    e[E_MON:E_MON + adapt.NMS] = est.monitor_s
     k[K_JUMP], k[K_JUMP_N] = d.jump_threshold, d.jump_debounce
     k[K_STUCK_N], k[K_STUCK_TOL] = d.stuck_samples, d.stuck_tolerance
     k[K_DRIFT_K], k[K_DRIFT_H], k[K_DRIFT_N] = d.drift_k, d.drift_h, d.drift_debounce
     k[K_HOLD] = d.hold_ticks
-    e = np.zeros(NE)
+    k[K_JUMP_STEP], k[K_JUMP_PVETO] = d.jump_step, d.jump_pressure_veto
+    e[E_YPREV], e[E_STEPPED] = d.y_prev, d.stepped
     e[E_OMEGA], e[E_PD_MEAS], e[E_PD_FILT] = est.omega_prev, est.pd_meas, est.pd_filt
     e[E_WFRIC] = est.w_fric
     e[E_UPDATES] = est.updates
@@ -83,7 +115,10 @@ def pack(est):
     if est.chambers:
         e[E_MODE] = kf.mode
         F, G = F.copy(), G.copy()           # overwritten per tick with the mode's pair
-        Fm, Gm = np.vstack([f for f, _ in kf.modes]), np.vstack([g for _, g in kf.modes])
+        # Gm: the stacked G (3 columns) then the unit-flow columns of adapt.parameter_columns
+        # Fm: the stacked F, then the leakage sensitivity D (adapt.predict_jacobian)
+        Fm = np.hstack((np.vstack([f for f, _ in kf.modes]), kf.Dm))
+        Gm = np.hstack((np.vstack([g for _, g in kf.modes]), kf.Lm))
     if est.is_model:
         u = kf.u
         g_leak = kf._g_leak if kf.i_leak is not None else np.zeros(1)
@@ -108,8 +143,13 @@ def unpack(est, e) -> None:
     for i, c in enumerate(CODES):
         d.hold[c], d.detections[c] = int(e[E_HOLD + i]), int(e[E_DET + i])
     d.code = int(e[E_CODE])
+    d.y_prev, d.stepped = float(e[E_YPREV]), bool(e[E_STEPPED] > 0.5)
+    est.monitor_s[:] = e[E_MON:E_MON + adapt.NMS]
     if est.chambers:
         kf = est.kf
+        kf.edge = int(e[E_EDGE])
+        kf.p_last[:] = e[E_PLAST:E_PLAST + 4]
+        kf.clipped[0] = e[E_CLIPPED]
         kf.mode = int(e[E_MODE])
         kf.F, kf.G = kf.modes[kf.mode]
 
@@ -123,7 +163,7 @@ def ready(k, e, position, w, pa, pb) -> bool:
         return False
     if k[K_USE_P] > 0.5 and not pressure_ok(k, pa, pb):
         return False
-    return not (k[K_ISOLATE] > 0.5 and e[E_CODE] != fd.NONE)
+    return not (k[K_ISOLATE] > 0.5 and (e[E_CODE] == fd.JUMP or e[E_CODE] == fd.STUCK))
 
 
 @njit(cache=True)
@@ -152,10 +192,14 @@ def pymax(a, b):
 
 
 @njit(cache=True)
-def detect(k, e, z, innovation, S) -> None:
+def detect(k, e, z, innovation, S, pz) -> None:
     """FaultDetector.update (jump, stuck, drift with hold), same operations."""
     r = innovation / math.sqrt(S) if S > 0.0 else 0.0
     e[E_NJUMP] = e[E_NJUMP] + 1 if abs(r) > k[K_JUMP] else 0
+    if e[E_NJUMP] == 1:
+        e[E_STEPPED] = 1.0 if (abs(innovation - e[E_YPREV]) >= k[K_JUMP_STEP] and
+                               pz < k[K_JUMP_PVETO]) else 0.0
+    e[E_YPREV] = innovation
     same = e[E_HAS_ZPREV] > 0.5 and abs(z - e[E_ZPREV]) <= k[K_STUCK_TOL]
     e[E_NSAME] = e[E_NSAME] + 1 if same else 0
     e[E_ZPREV] = z
@@ -163,7 +207,8 @@ def detect(k, e, z, innovation, S) -> None:
     e[E_GPOS] = pymax(0.0, e[E_GPOS] + r - k[K_DRIFT_K])
     e[E_GNEG] = pymax(0.0, e[E_GNEG] - r - k[K_DRIFT_K])
     e[E_NDRIFT] = e[E_NDRIFT] + 1 if pymax(e[E_GPOS], e[E_GNEG]) > k[K_DRIFT_H] else 0
-    now_jump = e[E_NJUMP] >= k[K_JUMP_N] and e[E_NSAME] < k[K_JUMP_N]
+    now_jump = (e[E_NJUMP] >= k[K_JUMP_N] and e[E_NSAME] < k[K_JUMP_N]
+                and e[E_STEPPED] > 0.5)
     now_stuck = e[E_NSAME] + 1 >= k[K_STUCK_N]
     now_drift = e[E_NDRIFT] >= k[K_DRIFT_N] and e[E_NSAME] < k[K_JUMP_N]
     if now_jump:
@@ -213,6 +258,13 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
                 F[i, j] = Fm[mode * n + i, j]
             for j in range(G.shape[1]):
                 G[i, j] = Gm[mode * n + i, j]
+        if k[K_ILAM] >= 0 or k[K_IDEL] >= 0 or k[K_IKAP] >= 0:
+            pl = e[E_PLAST:E_PLAST + 4]
+            adapt.pressure_increments(pl, x[2], x[3], k[K_ALPHA_DP])
+            adapt.parameter_columns(F, Gm, mode * n, G.shape[1], int(k[K_NLIN]),
+                                    int(k[K_ILAM]), int(k[K_IDEL]), int(k[K_IKAP]), x[2], x[3],
+                                    pl[2], pl[3], omega, k[K_CX], k[K_CR], k[K_PACC], k[K_DP],
+                                    k[K_CTS])
     elif k[K_MODEL] > 0.5:
         u[0] = omega
         has_pd = use_p and k[K_FRIC_P] > 0.5
@@ -223,9 +275,18 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
             pd = e[E_PD_FILT] if use_p else x[2]
             for i in range(int(k[K_NLIN])):
                 F[i, il] = g_leak[i] * pd
-    predict(x, P, F, G, u, Q, tmp)
+    il = int(k[K_ILAM])
+    if k[K_CHAMBERS] > 0.5 and il >= 0:
+        n = x.shape[0]
+        adapt.predict_jacobian(x, P, F, ws[:n * n].reshape((n, n)), Fm, int(e[E_MODE]) * n, n,
+                               int(k[K_NLIN]), x[il], G, u, Q, tmp)
+    else:
+        predict(x, P, F, G, u, Q, tmp)
     if pr_ok:
         e[E_PD_FILT] += k[K_ALPHA_PD] * (e[E_PD_MEAS] - e[E_PD_FILT])
+    iu = -1
+    if k[K_CHAMBERS] > 0.5:
+        iu = adapt.leakage_unexcited(x, int(k[K_ILAM]), k[K_PEXC])
     if pr_ok and use_p:
         zm[0] = position
         if k[K_CHAMBERS] > 0.5:
@@ -233,12 +294,26 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
             zm[2] = pb
         else:
             zm[1] = e[E_PD_MEAS]
-        nis = update_ws(x, P, H, R, zm, y, S, ws)
+        nis = update_gated(x, P, H, R, zm, y, S, ws, int(k[K_IFROZEN]), k[K_GATE], iu)
         innov, s00, m = y[0], S[0, 0], zm.shape[0]
+        pz = fd.pressure_z(y, S, m)
     else:
         z1[0] = position
-        nis = update_ws(x, P, H1, R1, z1, y1, S1, ws)
+        nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k[K_IFROZEN]), k[K_GATE], iu)
         innov, s00, m = y1[0], S1[0, 0], 1
+        pz = 0.0
+    if k[K_CHAMBERS] > 0.5:
+        e[E_EDGE] = adapt.project(x, int(k[K_ILAM]), k[K_LAMLO], k[K_LAMHI], int(k[K_IDEL]),
+                                  k[K_DELLO], k[K_DELHI], int(k[K_IKAP]), k[K_KAPLO],
+                                  k[K_KAPHI], int(k[K_IGM]), k[K_BMAX],
+                                  e[E_CLIPPED:E_CLIPPED + 1], adapt.EDGE_TICKS)
     e[E_UPDATES] += 1
-    detect(k, e, position, innov, s00)
+    detect(k, e, position, innov, s00, pz)
+    if k[K_CHAMBERS] > 0.5:
+        adapt.maneuver(Q, int(k[K_ILOAD]), pz, k[K_LOADZ], k[K_QLOAD], k[K_QLOADJ])
+    adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
+                  int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT, int(e[E_EDGE]))
+    if k[K_CHAMBERS] > 0.5:
+        adapt.disagree_noise(Q, x, int(k[K_IGM]), k[K_BDIS], k[K_MON:K_MON + adapt.NMK],
+                             e[E_MON:E_MON + adapt.NMS], int(e[E_EDGE]), k[K_QX], k[K_QXD])
     return x[0], innov, nis, m, int(e[E_CODE])

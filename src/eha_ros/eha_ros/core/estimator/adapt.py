@@ -1,0 +1,246 @@
+"""Adaptive model states, their projection, and the consistency monitor of the position
+estimator: written once, compiled, called by the Python filter (chamber_kf, estimator) and by
+the compiled stepper (stepper.estimate), so both paths run the same operations.
+
+Adaptive states (issue 15; Simon, "Optimal State Estimation", 2006, sec. 7.4-7.5 parameter
+estimation by state augmentation and constrained filtering by estimate projection): the
+uncertain flow parameters of Table 4.5 that the pressure sensors cannot see, as relative
+corrections held as random-walk states (k_T and k_E need none: the filter takes the measured
+motor speed as its input),
+
+- lambda: leakage, every leakage flow of the chamber model (C_x and C_r of eq. 3.15/3.20-3.21)
+  times (1 + lambda); Table 4.5 C_eq x0.1..10 is lambda in -0.9..9;
+- delta: displacement, the pump flow D_p omega times (1 + delta); Table 4.5 D_p x0.8..1;
+- kappa: compliance, the chambers' V_d/beta times (1 + kappa); Table 4.5 beta x0.7..1.4 is
+  kappa in -0.29..0.43. Its flow -kappa V_d/beta dp/dt uses the filter's own chamber-pressure
+  increment over the previous tick (posterior to posterior): the position error it explains
+  is kappa V_d/(beta A_p) times the pressure change (a 10 um step at every load reversal
+  with beta x0.7), so the one-tick lag and the pressure noise in it do not accumulate.
+
+Each enters the chamber rows as a flow multiplying a known input (the prior chamber pressures,
+the held speed, the pressure increment), so its F column is the ZOH column of a unit flow into
+each chamber times that flow. Without them the stiff pressure rows (beta/V_d = 3.4e12 Pa/m^3:
+1e-6 m^3/s of flow error is 3.4 kPa per tick against q_chamber's 0.1 kPa) pin the velocity to
+the nominal flow balance, and the position sensor's disagreement goes into the sensor offset
+b.
+
+Projection: after each update the adaptive states are clipped to their ranges and the
+sensor's Gauss-Markov offset b to +-offset_bound (the sensor's own error band); while filter
+and sensor disagree beyond the band, or a parameter sits on its bound, the position's process
+noise opens (:func:`disagree_noise`), so the estimate does not stay away from the measurement,
+whatever the model says. Also here: the EKF predict with the leakage Jacobian, the load-step
+process noise (:func:`maneuver`) and the consistency monitor (:func:`monitor`).
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from .kernels import mul, mulv
+
+# consistency verdicts (Estimator.consistency)
+OK, MODEL, DISAGREE, SENSOR = 0, 1, 2, 3      # in rising precedence
+VERDICTS = {OK: 'ok', SENSOR: 'sensor_fault', MODEL: 'model_mismatch',
+            DISAGREE: 'filter_sensor_disagree'}
+
+EDGE_TICKS = 200        # net updates with a clipped parameter that make an edge
+
+# monitor constants (array mk) and state (array ms)
+MK_ALPHA, MK_BAND, MK_N, MK_HOLD = 0, 1, 2, 3
+NMK = 4
+MS_D, MS_N, MS_HOLD, MS_VERDICT, MS_DET, MS_DMAX = 0, 1, 2, 3, 4, 5
+NMS = 6
+
+
+@njit(cache=True)
+def parameter_columns(F, L, row0, col0, n_lin, i_lam, i_del, i_kap, pa, pb, dpa, dpb, omega,
+                      C_x, C_r, p_acc, D_p, c_Ts):
+    """F columns of lambda, delta, kappa (module doc): L[row0 + i, col0] and
+    L[row0 + i, col0 + 1] are the ZOH columns of a unit flow (m^3/s) into chamber A and into
+    chamber B; pa, pb the prior chamber pressures (Pa), dpa, dpb their increments over the
+    previous tick (Pa), omega the held speed (rad/s), c_Ts = V_d/(beta Ts) (m^3/(Pa s))."""
+    qa = -(C_x * (pa - pb) + C_r * (pa - p_acc))       # nominal leakage flow into A
+    qb = -(C_x * (pb - pa) + C_r * (pb - p_acc))
+    qd = D_p * omega                                   # nominal pump flow into A (out of B)
+    ka = -c_Ts * dpa                                   # nominal compliance flow into A
+    kb = -c_Ts * dpb
+    for i in range(n_lin):
+        ga = L[row0 + i, col0]
+        gb = L[row0 + i, col0 + 1]
+        if i_lam >= 0:
+            F[i, i_lam] = ga * qa + gb * qb
+        if i_del >= 0:
+            F[i, i_del] = (ga - gb) * qd
+        if i_kap >= 0:
+            F[i, i_kap] = ga * ka + gb * kb
+
+
+@njit(cache=True)
+def pressure_increments(pl, pa, pb, alpha) -> None:
+    """pl = [p_A, p_B at the last predict, low-passed increments of p_A, p_B]: the compliance
+    flow's input, low-passed (alpha per tick) so the pressure noise in a one-tick difference
+    does not enter the model as flow noise; then pl[0:2] <- (pa, pb)."""
+    pl[2] += alpha * ((pa - pl[0]) - pl[2])
+    pl[3] += alpha * ((pb - pl[1]) - pl[3])
+    pl[0] = pa
+    pl[1] = pb
+
+
+@njit(cache=True)
+def predict_jacobian(x, P, F, Fj, Dm, row0, col0, n_lin, lam, G, u, Q, tmp):
+    """EKF predict of the adaptive chamber model: mean x <- F x + G u (eq. 4.1; the flows of
+    lambda, delta, kappa in F's parameter columns), covariance P <- Fj P Fj' + Q (eq. 4.2)
+    with the Jacobian Fj = F + lam D, D = Dm[row0:, col0:] the ZOH sensitivity of the linear
+    block to the leakage (Frechet derivative of expm): without it the filter would not know
+    that its pressure errors move the piston through the adapted leakage (x10 leakage: 90 %
+    of the leakage flow), and would trust its dead reckoning too much on a leaky plant."""
+    n = x.shape[0]
+    for i in range(n):
+        for j in range(n):
+            Fj[i, j] = F[i, j]
+    for i in range(n_lin):
+        for j in range(n_lin):
+            Fj[i, j] += lam * Dm[row0 + i, col0 + j]
+    xn = tmp[0]
+    mulv(F, x, xn, None, False)
+    mulv(G, u, xn, xn, False)
+    x[:] = xn
+    mul(Fj, P, tmp, None, False, False, False)
+    mul(tmp, Fj, P, Q, False, True, True)
+
+
+@njit(cache=True)
+def maneuver(Q, i_load, pz, threshold, q_low, q_high) -> None:
+    """Adjustable-level process noise of the external-force state (Bar-Shalom, Li,
+    Kirubarajan 2001, sec. 11.2, maneuver detection): after a sample whose pressure
+    innovation exceeds ``threshold`` (normalised) the next predict uses q_high, else q_low.
+    A load step is a force the random walk of q_low would take seconds to learn; meanwhile the
+    oil's compression (0.4 mm for 10 kN) would be taken for sensor offset and parameters."""
+    if i_load >= 0:
+        Q[i_load, i_load] = q_high if pz > threshold else q_low
+
+
+@njit(cache=True)
+def leakage_unexcited(x, i_lam, p_excite) -> int:
+    """i_lam while the load pressure |p_A - p_B| (prior) is below p_excite, else -1: at low
+    load pressure the leakage flow lambda C p is too small to tell lambda from the model's
+    other errors (friction, valves), which would bias lambda and turn into a flow error at
+    the next load (Table 3.4: lambda -0.46 learnt during the 3 Hz sine, a 10 kN step then
+    walked the estimate 110 um off). Dead-zone adaptation (Ioannou & Sun 1996, sec. 8.5)."""
+    if i_lam >= 0 and abs(x[2] - x[3]) < p_excite:
+        return i_lam
+    return -1
+
+
+@njit(cache=True)
+def clip(v, lo, hi):
+    return lo if v < lo else (hi if v > hi else v)
+
+
+@njit(cache=True)
+def on_bound(x, i, lo, hi) -> int:
+    """Clip x[i] to [lo, hi]; 1 when it was beyond."""
+    v = clip(x[i], lo, hi)
+    out = 1 if v != x[i] else 0
+    x[i] = v
+    return out
+
+
+@njit(cache=True)
+def project(x, i_lam, lam_lo, lam_hi, i_del, del_lo, del_hi, i_kap, kap_lo, kap_hi, i_gm,
+            b_max, clipped, edge_ticks) -> int:
+    """Estimate projection onto the bounds. ``clipped[0]`` counts up (to 2 edge_ticks) on an
+    update that clipped an adaptive state, down on one that did not; returns 1 (edge: the
+    model is at the edge of what it may adapt to) while it is at least ``edge_ticks``: a
+    parameter held on its bound, not one that touched it in a transient (start-up, p0 the
+    whole family)."""
+    n = 0
+    if i_lam >= 0:
+        n += on_bound(x, i_lam, lam_lo, lam_hi)
+    if i_del >= 0:
+        n += on_bound(x, i_del, del_lo, del_hi)
+    if i_kap >= 0:
+        n += on_bound(x, i_kap, kap_lo, kap_hi)
+    if i_gm >= 0 and b_max > 0.0:
+        x[i_gm] = clip(x[i_gm], -b_max, b_max)
+    if n > 0:
+        clipped[0] = clipped[0] + 1 if clipped[0] < 2 * edge_ticks else clipped[0]
+    elif clipped[0] > 0:
+        clipped[0] -= 1
+    return 1 if clipped[0] >= edge_ticks else 0
+
+
+@njit(cache=True)
+def monitor(mk, ms, z, x_hat, sensor_code, drift, edge) -> int:
+    """Consistency verdict of one tick (Bar-Shalom, Li, Kirubarajan, "Estimation with
+    Applications to Tracking and Navigation", 2001, sec. 5.4 filter consistency, 11.2 fading
+    memory / innovation bias): d = z - x_hat, the measurement's disagreement with the
+    estimate, low-passed (the white noise averages out, the sensor's Gauss-Markov wander and a
+    model error do not).
+
+    - MODEL: a slow persistent innovation bias (the detector's CUSUM) or an adaptive state on
+      its bound: the model is wrong; adaptation absorbs what is within its ranges;
+    - DISAGREE: |low-passed d| above the sensor's error band for MK_N samples: the filter
+      holds the estimate away from the measurement by more than the sensor can be wrong;
+    - SENSOR: the fault detector reports a jump or a stuck sensor (a fast innovation step with
+      quiet pressures, or frozen readings): the disagreement is the sensor's.
+    Precedence SENSOR > DISAGREE > MODEL. A verdict stays reported MK_HOLD samples after its
+    condition clears (a milder condition meanwhile does not extend it), then the current one.
+    DISAGREE and SENSOR call for the safe state (:func:`safe_state`).
+    """
+    ms[MS_D] += mk[MK_ALPHA] * ((z - x_hat) - ms[MS_D])
+    a = abs(ms[MS_D])
+    if a > ms[MS_DMAX]:
+        ms[MS_DMAX] = a
+    ms[MS_N] = ms[MS_N] + 1 if a > mk[MK_BAND] else 0
+    now = OK
+    if drift or edge > 0:
+        now = MODEL
+    if ms[MS_N] >= mk[MK_N]:
+        now = DISAGREE
+    if sensor_code == 1 or sensor_code == 2:        # fault_detector JUMP, STUCK
+        now = SENSOR
+    if now != OK and (ms[MS_HOLD] <= 0 or now >= ms[MS_VERDICT]):
+        if ms[MS_HOLD] <= 0 or now > ms[MS_VERDICT]:
+            ms[MS_DET] += 1                          # a new (or more severe) verdict
+        ms[MS_VERDICT] = now
+        ms[MS_HOLD] = mk[MK_HOLD]
+    else:
+        if ms[MS_HOLD] > 0:
+            ms[MS_HOLD] -= 1
+        if ms[MS_HOLD] <= 0:
+            ms[MS_VERDICT] = now
+            if now != OK:
+                ms[MS_DET] += 1
+                ms[MS_HOLD] = mk[MK_HOLD]
+    return int(ms[MS_VERDICT])
+
+
+@njit(cache=True)
+def disagree_noise(Q, x, i_gm, b_dis, mk, ms, edge, q_low, q_high) -> None:
+    """While the disagreement condition holds (|low-passed z - x_hat| above the band for MK_N
+    samples), while the DISAGREE verdict stays reported (its hold) and while an adaptive state
+    sits on its bound (edge > 0: the model is beyond what it can adapt to), the position's
+    process noise is q_high instead of q_low: the filter's dead reckoning is proven wrong, so
+    its position variance opens and the gain pulls the estimate to the measurement
+    (adjustable-level process noise, Bar-Shalom et al. 2001 sec. 11.2). Meanwhile the sensor
+    offset estimate b is held within +-b_dis (its own sigma): a persistent disagreement is not
+    a Gauss-Markov wander of the sensor, and with the position free b would otherwise keep it
+    (it is pushed by every innovation, K_b e per tick, and decays only at 2 pi f_c)."""
+    if ms[MS_N] >= mk[MK_N] or ms[MS_VERDICT] == DISAGREE or edge > 0:
+        Q[0, 0] = q_high
+        if i_gm >= 0:
+            x[i_gm] = clip(x[i_gm], -b_dis, b_dis)
+    else:
+        Q[0, 0] = q_low
+
+
+def safe_state(verdict: int) -> bool:
+    """The verdicts the nodes answer with the safe state (filter and sensor disagree beyond
+    the band, or the sensor is faulty)."""
+    return verdict in (DISAGREE, SENSOR)
+
+
+def lowpass_alpha(f_hz: float, Ts: float) -> float:
+    return 1.0 - math.exp(-2.0 * math.pi * f_hz * Ts)

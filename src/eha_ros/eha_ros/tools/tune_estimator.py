@@ -1,0 +1,96 @@
+"""tune_estimator: derive the estimator's adaptive-state noise, projection ranges, sensor band
+and jump step from the Table 4.5 family and the sensor model (core.estimator.tuning), print
+them, and with --write put them into config/estimator.yaml (comments kept)."""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+
+from ..core.cli import guarded
+from ..core.estimator import tuning
+from ..core.params import default_config_dir, load
+from ..core.plant.parameters import PLANT_SCHEMA
+from ..core.qft.spec import load_spec
+
+PROG = 'tune_estimator'
+
+
+def parse(argv):
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
+    cfg = default_config_dir()
+    ap.add_argument('--spec', default=os.path.join(cfg, 'qft_spec.yaml'),
+                    help='family ranges (family.*_range), default config/qft_spec.yaml')
+    ap.add_argument('--plant', default=os.path.join(cfg, 'plant.yaml'),
+                    help='sensor model (plant.sensors.*)')
+    ap.add_argument('--out', default=os.path.join(cfg, 'estimator.yaml'))
+    ap.add_argument('--write', action='store_true', help='update --out in place')
+    d = tuning.Inputs(family={})
+    for name in ('T_op', 'p_fa', 'margin', 'rho', 'T_memory', 'monitor_lowpass', 'jump_k'):
+        ap.add_argument('--' + name.replace('_', '-'), type=float, default=getattr(d, name))
+    return ap.parse_args(argv)
+
+
+def fmt(v) -> str:
+    if isinstance(v, list):
+        return '[' + ', '.join(fmt(x) for x in v) + ']'
+    return f'{v:.4g}' if abs(v) >= 1e-3 or v == 0 else f'{v:.4e}'
+
+
+def write(path: str, values: dict) -> None:
+    """Replace each key's value in the estimator YAML (nested keys, comments kept)."""
+    lines = open(path).read().split('\n')
+    for key, v in values.items():
+        *parents, leaf = key.split('.')
+        start = 0
+        for p in parents:                           # find the parent section in order
+            pat = re.compile(rf'^\s*{re.escape(p)}:\s*(#.*)?$')
+            start = next(i for i in range(start, len(lines)) if pat.match(lines[i])) + 1
+        pat = re.compile(rf'^(\s*{re.escape(leaf)}:\s*)([^#]*?)(\s*#.*)?$')
+        for i in range(start, len(lines)):
+            m = pat.match(lines[i])
+            if m:
+                head, comment = m.group(1) + fmt(v), (m.group(3) or '').strip()
+                col = len(m.group(1)) + len(m.group(2)) + len(m.group(3) or '') - len(comment)
+                lines[i] = (head.ljust(max(col, len(head) + 1)) + comment) if comment else head
+                break
+        else:
+            raise KeyError(f'{path}: estimator.{key} not found')
+    open(path, 'w').write('\n'.join(lines))
+
+
+def main(argv=None) -> int:
+    a = parse(sys.argv[1:] if argv is None else argv)
+    spec = load_spec(a.spec)
+    pp = load(PLANT_SCHEMA, [a.plant])
+    fam = {n: tuple(spec[f'family.{n}_range']) for n in ('C_eq', 'D_p', 'beta', 'k_T', 'k_E')}
+    n = 1
+    for name in fam:
+        n *= spec[f'family.{name}_n']
+    s = 'plant.sensors.'
+    inp = tuning.Inputs(family=fam, Ts=pp['plant.sim.Ts'], position_sigma=pp[s + 'position_sigma'],
+                        gm_sigma=pp[s + 'position_gm_sigma'],
+                        gm_corner=pp[s + 'position_gm_corner'],
+                        n_plants=n, T_op=a.T_op, p_fa=a.p_fa, margin=a.margin, rho=a.rho,
+                        T_memory=a.T_memory, monitor_lowpass=a.monitor_lowpass, jump_k=a.jump_k,
+                        A_p=pp['plant.cylinder.A_p'],
+                        C_leak=(pp['plant.pump.C_p'] + pp['plant.cylinder.C_c']
+                                + pp['plant.pump.C_r']))
+    res = tuning.derive(inp)
+    for line in res['notes']:
+        print(line)
+    for k, v in res['values'].items():
+        print(f'estimator.{k}: {fmt(v)}')
+    if a.write:
+        write(a.out, res['values'])
+        print(f'written: {a.out}')
+    return 0
+
+
+def entry() -> int:
+    return guarded(PROG, main)
+
+
+if __name__ == '__main__':
+    sys.exit(entry())

@@ -1,0 +1,213 @@
+"""Issue 15: the estimator on the plant family of Table 4.5 (core only, no DDS).
+
+The adaptive chamber EKF (core.estimator.adapt: leakage, displacement, compliance corrections
+with the leakage Jacobian, estimate projection, gated adaptation, load-step process noise),
+the consistency monitor (sensor fault vs model mismatch vs filter/sensor disagreement) and the
+tuning derived from the family (core.estimator.tuning, scripts/tune_estimator). Closed loop:
+nonlinear plant varied through plant_sim overrides, estimator and controller nominal
+(core.batch.BatchStack, compiled path)."""
+import os
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from eha_ros.core.batch import BatchLoop, BatchStack, node_params
+from eha_ros.core.closed_loop import R_FAULT, R_X, R_XHAT, R_XM
+from eha_ros.core.estimator import adapt, tuning
+from eha_ros.core.estimator import fault_detector as fd
+from eha_ros.core.estimator.chamber_kf import ChamberKF, continuous, leak_sensitivity
+from eha_ros.core.estimator.estimator import Estimator
+from eha_ros.core.plant_sim_params import SCHEMA as SIM
+from eha_ros.core.qft.family import scaled_params
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+KEYS = ('plant.pump.C_p', 'plant.cylinder.C_c', 'plant.pump.C_r', 'plant.pump.D_p',
+        'plant.fluid.beta', 'plant.motor.k_T', 'plant.motor.k_E')
+
+
+def plant(scale):
+    """plant_sim overrides of a Table 4.5 plant [C_eq, D_p, beta, k_T, k_E]."""
+    p = scaled_params(node_params('plant_sim', SIM), scale)
+    return {k: p[k] for k in KEYS}
+
+
+def stack(scale, seed=1, faults=None, est=None):
+    s = BatchStack(seed=seed, overrides={'plant_sim': plant(scale), 'estimator': est or {}})
+    s._loop = BatchLoop(s.plant, s.estimator, s.controller, faults=faults)
+    return s
+
+
+def run(s, refs, loads=None):
+    return s._loop.run(np.asarray(refs, float), None if loads is None else np.asarray(loads, float))
+
+
+# ------------------------------------------------------------------ the adaptive EKF
+def test_leak_sensitivity_is_the_derivative_of_the_zoh(params):
+    kf = Estimator(params).kf
+    c, Ts = kf.c, kf.Ts
+    A, _ = continuous(c, True, False, 1.0)
+    D = leak_sensitivity(c, A, Ts, kf.n)[:A.shape[0], :A.shape[0]]
+    AL = np.zeros_like(A)
+    k = c.beta / c.V_d
+    for i in (2, 3):
+        AL[i, i], AL[i, 5 - i] = -k * (c.C_x + c.C_r), k * c.C_x
+    h = 1e-4
+    fd_ = (expm((A + h * AL) * Ts) - expm((A - h * AL) * Ts)) / (2 * h)
+    assert np.allclose(D, fd_, rtol=1e-5, atol=1e-9 * np.abs(fd_).max())
+
+
+def test_adaptive_predict_is_the_ekf_with_the_leakage_jacobian(params):
+    """Mean: F (with the parameter columns) x + G u; covariance: Fj P Fj' + Q with
+    Fj = F + lambda D (the Jacobian of the leakage flow lambda C p in p)."""
+    kf = Estimator(params).kf
+    assert isinstance(kf, ChamberKF) and min(kf.i_lam, kf.i_del, kf.i_kap) > 0
+    rng = np.random.default_rng(1)
+    kf.x[2:4] = kf.c.p_acc + np.array([20e5, -0.3e5])
+    kf.x[kf.i_lam], kf.x[kf.i_del], kf.x[kf.i_kap] = 4.0, -0.1, 0.2
+    A = rng.normal(size=(kf.n, kf.n)) * np.sqrt(np.diag(kf.P))
+    kf.P = A @ A.T / kf.n + np.diag(np.diag(kf.P))
+    x0, P0 = kf.x.copy(), kf.P.copy()
+    kf.predict(300.0, 19e5)
+    F, G = kf.modes[kf.mode]
+    Fj = F.copy()
+    nl = kf._n_lin
+    Fj[:nl, :nl] += 4.0 * kf.Dm[kf.mode * kf.n:kf.mode * kf.n + nl, :nl]
+    assert np.allclose(kf.x, F @ x0 + G @ kf.u, rtol=1e-12, atol=1e-12)
+    assert np.allclose(kf.P, Fj @ P0 @ Fj.T + kf.Q, rtol=1e-10, atol=1e-14)
+    # the leakage column is the flow lambda C (p - ...) through the ZOH of a unit flow
+    assert np.any(F[:nl, kf.i_lam] != 0.0) and np.any(F[:nl, kf.i_del] != 0.0)
+
+
+def test_projection_bounds_and_offset_band(params):
+    kf = Estimator(params).kf
+    kf.x[kf.i_lam], kf.x[kf.i_del], kf.x[kf.i_kap], kf.x[kf.i_gm] = 99.0, -9.0, 0.1, -1e-3
+    assert kf.project() == 0          # a clip: the projection at work, no verdict yet
+    assert kf.x[kf.i_lam] == kf.lam_range[1] and kf.x[kf.i_del] == kf.del_range[0]
+    assert kf.x[kf.i_kap] == 0.1 and kf.x[kf.i_gm] == -kf.offset_bound
+    for _ in range(adapt.EDGE_TICKS - 2):
+        kf.x[kf.i_lam] = 99.0
+        assert kf.project() == 0
+    kf.x[kf.i_lam] = 99.0
+    assert kf.project() == 1          # held on its bound: the model is at its edge
+
+
+# ------------------------------------------------------------------ the family
+@pytest.mark.parametrize('scale', [[10, 1, 1, 1, 1], [10, 0.8, 0.7, 1.2, 0.8],
+                                   [0.1, 1, 1.4, 0.8, 1.2]])
+def test_load_step_holds_on_the_leaky_and_the_tight_corner(scale):
+    """Issue 15: leakage x10 ran away at 25 mm/s (-44 mm after 2 s) while the estimate said
+    0.00 mm; the opposite corner ended 4 mm off. 5 kN load step while holding 0."""
+    s = stack(scale)
+    n = 5000
+    t = np.arange(n) * 1e-3
+    rec = run(s, np.zeros(n), np.where(t >= 0.5, 5e3, 0.0))
+    x, xh = rec[:, R_X], rec[:, R_XHAT]
+    w = (t >= 4.0) & (t < 5.0)
+    peak = np.abs(x[t >= 0.5]).max()
+    print(f'\n{scale}: peak {peak * 1e3:.3f} mm, 3.5-4.5 s after the step '
+          f'{np.mean(x[w]) * 1e6:.1f} um, estimate {np.mean(xh[w]) * 1e6:.1f} um, '
+          f'lambda {s.estimator.kf.leakage_correction:.2f}')
+    assert peak < 0.5e-3
+    assert abs(np.mean(x[w])) < 20e-6
+    assert not (rec[:, R_FAULT] == fd.JUMP).any()          # a load step is not a sensor jump
+    assert s.estimator.consistency != adapt.DISAGREE
+
+
+def test_displacement_x0_8_step_reaches_the_target():
+    """Issue 15: D_p x0.8, a 5 mm step ended 0.5-0.8 mm short while the estimate said 5.000."""
+    s = stack([1, 0.8, 1, 1, 1])
+    n = 1600
+    t = np.arange(n) * 1e-3
+    rec = run(s, np.where(t >= 0.1, 5e-3, 0.0))
+    x = rec[:, R_X]
+    w = (t >= 1.1) & (t < 1.6)
+    print(f'\nD_p x0.8: overshoot {(x.max() - 5e-3) / 5e-5:.2f} %, steady '
+          f'{(np.mean(x[w]) - 5e-3) * 1e6:.1f} um, delta '
+          f'{s.estimator.kf.displacement_correction:+.3f}')
+    assert abs(np.mean(x[w]) - 5e-3) < 20e-6
+    # the overshoot (6.3 % here) is the controller's: the drive saturates on voltage below the
+    # 838 rad/s clamp the anti-windup knows (issue 17); with the truth fed back it is the same
+
+
+def test_estimate_stays_near_the_sensor_beyond_the_adaptation_range():
+    """Leakage x40 (lambda 39 beyond its 17.7 bound), 5 kN load step: the model cannot follow.
+    With lambda on its bound the position noise opens and the offset is held to its sigma
+    (adapt.disagree_noise), so the estimate stays near the sensor, the loop holds on it, and
+    the monitor reports it (MODEL / DISAGREE) -- loud, not a silent runaway."""
+    s = stack([40, 1, 1, 1, 1])
+    n = 3000
+    t = np.arange(n) * 1e-3
+    rec = run(s, np.zeros(n), np.where(t >= 0.5, 5e3, 0.0))
+    x, xh, xm = rec[:, R_X], rec[:, R_XHAT], rec[:, R_XM]
+    kf = s.estimator.kf
+    late = t > 0.6
+    print(f'\nC_eq x40: max |x| {np.abs(x).max() * 1e3:.3f} mm '
+          f'({np.abs(x[t > 2.0]).max() * 1e3:.3f} '
+          f'after 2 s), max |z - x_hat| after 0.6 s {np.abs(xm - xh)[late].max() * 1e6:.0f} um, '
+          f'lambda {kf.leakage_correction:.2f}, verdict {adapt.VERDICTS[s.estimator.consistency]}')
+    assert np.abs(xm - xh)[late].max() < 0.4e-3
+    assert np.abs(x[t > 2.0]).max() < 0.5e-3
+    assert kf.leakage_correction > kf.lam_range[1] - 0.1          # on its bound
+    assert s.estimator.consistency in (adapt.MODEL, adapt.DISAGREE)
+
+
+# ------------------------------------------------------------------ faults vs mismatch
+@pytest.mark.parametrize('scale', [[1, 1, 1, 1, 1], [10, 0.8, 0.7, 0.8, 1.2],
+                                   [0.1, 1, 1.4, 1.2, 0.8]])
+@pytest.mark.parametrize('fault,code', [(('msp_bias', 0, 1e-3, 0.0), fd.JUMP),
+                                        (('msp_stuck', 0, 0.0, 0.0), fd.STUCK)])
+def test_sensor_fault_detected_isolated_and_told_from_mismatch(scale, fault, code):
+    """1 mm bias / stuck sensor at 2 s during the 1 Hz 5 mm sine: reported within 50 ms as
+    a sensor fault; the estimator isolates the sensor (predict-only on the adapted model), so
+    the piston does not follow the faulty reading."""
+    s = stack(scale, seed=3, faults={2000: [fault]})
+    n = 2300
+    t = np.arange(n) * 1e-3
+    ref = 5e-3 * np.sin(2 * np.pi * t)
+    rec = run(s, ref)
+    codes = rec[:, R_FAULT]
+    hit = np.nonzero((t >= 2.0) & (codes != 0))[0]
+    assert not codes[t < 2.0].any()
+    assert hit.size and codes[hit[0]] == code
+    delay = t[hit[0]] - 2.0
+    err = np.abs(rec[:, R_X] - ref)
+    before, after = err[(t >= 1.0) & (t < 2.0)].max(), err[t >= 2.0].max()
+    print(f'\n{scale} {fault[0]}: detected after {delay * 1e3:.0f} ms; tracking error '
+          f'{before * 1e6:.0f} um before, {after * 1e6:.0f} um in the 0.3 s after; verdict '
+          f'{adapt.VERDICTS[s.estimator.consistency]}')
+    assert delay <= 0.050
+    assert s.estimator.consistency == adapt.SENSOR and s.estimator.safe_state_required
+    assert after < before + 0.1e-3      # isolated: the piston does not follow the bad reading
+
+
+def test_monitor_verdicts_hold_and_severity():
+    mk = np.array([1.0, 1e-4, 2.0, 3.0])          # no low-pass, band 0.1 mm, 2 samples, hold 3
+    ms = np.zeros(adapt.NMS)
+    step = lambda d, code=0, drift=False, edge=0: adapt.monitor(mk, ms, d, 0.0, code, drift, edge)
+    assert step(0.0) == adapt.OK
+    assert step(0.0, drift=True) == adapt.MODEL
+    assert step(2e-4) == adapt.MODEL and step(2e-4) == adapt.DISAGREE
+    assert step(0.0, drift=True) == adapt.DISAGREE      # a milder verdict does not replace it
+    assert step(0.0, code=fd.JUMP) == adapt.SENSOR
+    assert [step(0.0) for _ in range(4)] == [adapt.SENSOR, adapt.SENSOR, adapt.OK, adapt.OK]
+    assert adapt.safe_state(adapt.SENSOR) and adapt.safe_state(adapt.DISAGREE)
+    assert not adapt.safe_state(adapt.MODEL)
+
+
+# ------------------------------------------------------------------ tuning
+def test_yaml_holds_the_tuning_derived_from_the_family(params):
+    """config/estimator.yaml carries what scripts/tune_estimator derives (4 digits)."""
+    from eha_ros.tools import tune_estimator as T
+    from eha_ros.core.qft.spec import load_spec
+    spec = load_spec(os.path.join(ROOT, 'config', 'qft_spec.yaml'))
+    fam = {n: tuple(spec[f'family.{n}_range']) for n in ('C_eq', 'D_p', 'beta', 'k_T', 'k_E')}
+    inp = tuning.Inputs(family=fam, position_sigma=params['plant.sensors.position_sigma'],
+                        gm_sigma=params['plant.sensors.position_gm_sigma'],
+                        gm_corner=params['plant.sensors.position_gm_corner'],
+                        A_p=params['plant.cylinder.A_p'],
+                        C_leak=params['plant.pump.C_p'] + params['plant.cylinder.C_c']
+                        + params['plant.pump.C_r'])
+    for key, v in tuning.derive(inp)['values'].items():
+        want = [float(T.fmt(a)) for a in v] if isinstance(v, list) else float(T.fmt(v))
+        assert params['estimator.' + key] == pytest.approx(want, rel=1e-12), key

