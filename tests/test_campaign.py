@@ -154,6 +154,15 @@ def test_nominal_runs_give_the_stack_figures():
     assert figs['final_channel'] == 1 and figs['drive_time_s'] <= 0.1
 
 
+def test_false_alarm_scenario_counts_alarms_without_a_fault():
+    """false_alarm.yaml's form (fault at the run's end: never injected), shortened to 3 s."""
+    scn = SC.load('false_alarm')
+    scn.params.update(duration=3.0, t_fault=3.0)
+    figs, _ = SC.run(scn, C.nominal_params(), {c: 1.0 for c in F.COLUMNS}, 1)
+    assert figs['false_alarm_ticks'] == 0 and figs['detection_time_s'] == float('inf')
+    assert SC.judge(figs, scn.specs) == (True, '')
+
+
 def test_a_leaky_plant_differs_from_nominal():
     """The campaign varies the plant only: x10 leakage changes the load-step response."""
     nom = C.nominal_params()

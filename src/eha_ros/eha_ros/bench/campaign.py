@@ -10,7 +10,7 @@ first_row_s (from the call to the first finished chunk), campaign_wall_s, single
 The timed campaign runs on an already started and warmed-up cluster, as a long campaign
 sees it; the cold-start keys say what a fresh cluster adds once.
 
-``run(args)``: args may carry ``duration`` (ignored), ``runs`` (default 60), ``workers`` (2),
+``run(args)``: args may carry ``duration`` (ignored), ``runs`` (default 270: the thesis family), ``workers`` (2),
 ``scenario`` ('sine': 30 s runs of the 1 Hz sine).
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ def run(args) -> dict:
     from ..core.sim import campaign as C
     from ..core.sim import family as F
     from ..core.sim import scenarios as SC
-    n, workers = int(_get(args, 'runs', 60)), int(_get(args, 'workers', 2))
+    n, workers = int(_get(args, 'runs', 270)), int(_get(args, 'workers', 2))
     name = _get(args, 'scenario', 'sine')
     scn = SC.load(name)
     fam_all = F.thesis()

@@ -392,14 +392,15 @@ def motor_fail_figures(s, p, Ts):
 
 
 def sensor_fault_figures(s, p, Ts):
-    """Estimator's detection time of the injected sensor fault; false alarms before it."""
+    """Estimator's detection time of the injected sensor fault (inf: none; a fault at or after
+    the run's end is never injected: false_alarm), false alarms before it."""
     t, code = s['t'], s['fault']
     before = t < p['t_fault'] - 1e-9
     hits = np.nonzero((~before) & (code != 0))[0]
+    err = np.abs(s['truth'][~before] - s['reference'][~before])
     return {'detection_time_s': float(t[hits[0]] - p['t_fault'] + Ts) if len(hits) else math.inf,
             'false_alarm_ticks': float(np.count_nonzero(code[before] != 0)),
-            'peak_deviation_m': float(np.max(np.abs(s['truth'][~before] -
-                                                    s['reference'][~before])))}
+            'peak_deviation_m': float(np.max(err)) if len(err) else math.nan}
 
 
 FIGURES = {'step': step_figures, 'load_step': load_step_figures, 'sweep': sweep_figures,
