@@ -206,8 +206,8 @@ def _write_part(parts: str, rows: list, traces: list) -> None:
     os.replace(tmp + '.parquet', os.path.join(parts, f'chunk-{index:06d}.parquet'))
 
 
-def read_parts(out_dir: str):
-    """(rows DataFrame, traces dict or None) of every finished chunk in DIR/parts."""
+def read_parts(out_dir: str, with_traces: bool = True):
+    """(rows DataFrame, [(run_id, trace dict)]) of every finished chunk in DIR/parts."""
     import pandas as pd
     files = sorted(glob.glob(os.path.join(out_dir, 'parts', 'chunk-*.parquet')))
     frames = [pd.read_parquet(f) for f in files]
@@ -215,30 +215,29 @@ def read_parts(out_dir: str):
     if len(df):
         df = df.drop_duplicates('run_id', keep='last').sort_values('run_id')
         df = df.reset_index(drop=True)
-    traces = _merge_traces(sorted(glob.glob(os.path.join(out_dir, 'parts', 'chunk-*.npz'))))
-    return df, traces
-
-
-def _merge_traces(files: list):
-    """One {'t', 'run_id', signal: (N, M)} of the per-chunk traces, resampled on the longest
-    run's time base (runs of one scenario have the same length)."""
-    ids, sig = [], {}
-    for f in files:
+    pairs = []
+    for f in sorted(glob.glob(os.path.join(out_dir, 'parts', 'chunk-*.npz'))) \
+            if with_traces else ():
         with np.load(f, allow_pickle=True) as z:
-            ids.extend(int(i) for i in z['run_id'])
-            for k in z.files:
-                if k != 'run_id':
-                    sig.setdefault(k, []).extend(list(z[k]))
-    if not ids:
+            keys = [k for k in z.files if k != 'run_id']
+            cols = {k: z[k] for k in keys}
+            for i, rid in enumerate(z['run_id']):
+                pairs.append((int(rid), {k: cols[k][i] for k in keys}))
+    return df, pairs
+
+
+def merge_traces(pairs: list):
+    """One {'t', 'run_id', signal: (N, M)} of (run_id, trace) pairs, sorted by run id, cut to
+    the shortest trace (runs of one scenario have the same length)."""
+    pairs = sorted({rid: tr for rid, tr in pairs if tr is not None}.items())
+    if not pairs:
         return None
-    order = np.argsort(ids, kind='stable')
-    _, first = np.unique(np.asarray(ids)[order], return_index=True)
-    keep = order[first]
-    m = min(len(a) for a in sig['t'])
-    out = {'t': np.asarray(sig['t'][keep[0]][:m], float), 'run_id': np.asarray(ids)[keep]}
-    for k, v in sig.items():
+    m = min(len(tr['t']) for _, tr in pairs)
+    out = {'t': np.asarray(pairs[0][1]['t'][:m], float),
+           'run_id': np.array([rid for rid, _ in pairs])}
+    for k in pairs[0][1]:
         if k != 't':
-            out[k] = np.array([np.asarray(v[i][:m], float) for i in keep])
+            out[k] = np.array([np.asarray(tr[k][:m], float) for _, tr in pairs])
     return out
 
 
@@ -327,7 +326,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         os.makedirs(parts, exist_ok=True)
         if not resume:
             table.to_parquet(os.path.join(out, 'family.parquet'), index=False)
-        done_df, _ = read_parts(out)
+        done_df, done_traces = read_parts(out, with_traces=bool(resume))
         done = set(int(i) for i in done_df['run_id']) if len(done_df) else set()
         todo = [i for i in range(n) if i not in done]
         info = dict(scenario=scn.as_dict(), family=family, seed=int(seed), count=n,
@@ -343,6 +342,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
             bar.failed = int((~done_df['passed'].astype(bool)).sum())
         first_row = None
         interrupted = False
+        new_rows, new_traces = [], []
         t_run = time.monotonic()
         groups = chunks(todo, n_workers, chunk_size)
         if groups:
@@ -360,6 +360,8 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
                 for f in as_completed(list(futures)):
                     rows, traces = f.result()
                     _write_part(parts, rows, traces)
+                    new_rows.extend(rows)
+                    new_traces.extend((r['run_id'], tr) for r, tr in zip(rows, traces))
                     if first_row is None:
                         first_row = time.monotonic() - t_start
                     bar.update(len(rows), sum(not r['passed'] for r in rows))
@@ -368,9 +370,12 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
                 client.cancel(list(futures))
         bar.close()
         wall = time.monotonic() - t_start
-        df, traces = read_parts(out)
+        frames = [x for x in (done_df, pd.DataFrame(new_rows)) if len(x)]
+        df = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
         if len(df):
-            df = df.sort_values('run_id').reset_index(drop=True)
+            df = df.drop_duplicates('run_id', keep='last').sort_values('run_id')
+            df = df.reset_index(drop=True)
+        traces = merge_traces(done_traces + new_traces)
         passed = int(df['passed'].astype(bool).sum()) if len(df) else 0
         plant_s = float(df['plant_s'].sum()) if 'plant_s' in df else 0.0
         ran = df[df['run_id'].isin(todo)] if len(df) else df
@@ -384,7 +389,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
                     errors=int((df['error'] != '').sum()) if 'error' in df else 0)
         df.to_parquet(os.path.join(out, 'results.parquet'), index=False)
         if traces is not None:
-            np.savez_compressed(os.path.join(out, 'traces.npz'), **traces)
+            np.savez(os.path.join(out, 'traces.npz'), **traces)
         _write_json(os.path.join(out, 'campaign.json'), info)
         if report and len(df):
             from .report import write_report
