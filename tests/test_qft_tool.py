@@ -158,7 +158,8 @@ def test_stiff_design_keeps_steady_accuracy_with_the_friction_lowpass(tmp_path):
         res[name] = (max(err), float(np.mean(noise)))
     print('5 mm step, worst steady error [m] and command noise [rad/s]:', res)
     assert res['stack controller'][0] <= 20e-6 and res['stiff'][0] <= 20e-6
-    assert res['stiff, no low-pass'][0] > 20e-6
+    # with the adaptive states of issue 15 the filter no longer drifts without the low-pass
+    # either (5.6 um; was 65 um): printed, not asserted
     assert res['stiff, no low-pass'][1] > 3 * res['stiff'][1]
 
 

@@ -370,12 +370,16 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
                 client.cancel(list(futures))
         bar.close()
         wall = time.monotonic() - t_start
-        frames = [x for x in (done_df, pd.DataFrame(new_rows)) if len(x)]
-        df = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
-        if len(df):
-            df = df.drop_duplicates('run_id', keep='last').sort_values('run_id')
-            df = df.reset_index(drop=True)
-        traces = merge_traces(done_traces + new_traces)
+        if interrupted:          # the parts on disk are the truth (a chunk may be half-noted)
+            df, pairs = read_parts(out)
+        else:
+            frames = [x for x in (done_df, pd.DataFrame(new_rows)) if len(x)]
+            df = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+            if len(df):
+                df = df.drop_duplicates('run_id', keep='last').sort_values('run_id')
+                df = df.reset_index(drop=True)
+            pairs = done_traces + new_traces
+        traces = merge_traces(pairs)
         passed = int(df['passed'].astype(bool).sum()) if len(df) else 0
         plant_s = float(df['plant_s'].sum()) if 'plant_s' in df else 0.0
         ran = df[df['run_id'].isin(todo)] if len(df) else df
