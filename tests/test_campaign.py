@@ -4,7 +4,6 @@ external `dask scheduler` + `dask worker` on loopback, bad input."""
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -19,6 +18,7 @@ from eha_ros.core.cli import UsageError
 from eha_ros.core.sim import campaign as C
 from eha_ros.core.sim import family as F
 from eha_ros.core.sim import scenarios as SC
+from test_bridge_core import free_port
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BIN = os.path.dirname(sys.executable)
@@ -262,16 +262,10 @@ def test_cli_ctrl_c_keeps_rows_and_resume_finishes(tmp_path):
     assert json.loads((out / 'campaign.json').read_text())['complete'] is True
 
 
-def _free_port():
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
-
-
 def test_cli_on_an_external_dask_scheduler_and_worker(tmp_path):
     """`dask scheduler` and `dask worker` as separate processes on loopback; the campaign runs
     there with --scheduler and nothing else changed."""
-    port = _free_port()
+    port = free_port()
     addr = f'tcp://127.0.0.1:{port}'
     env = dict(os.environ, PYTHONUNBUFFERED='1')
     procs = [subprocess.Popen([os.path.join(BIN, 'dask'), 'scheduler', '--host', '127.0.0.1',

@@ -32,14 +32,10 @@ from ..core.estimator import stepper as ES
 from ..core.plant import stepper as PS
 from ..core.jit_cache import drop_stale
 from ..core.redundancy import stepper as RS
+from . import arg as _arg
 
 drop_stale(__file__, '../core', '../core/plant', '../core/estimator', '../core/controller',
            '../core/redundancy')
-
-
-def _get(args, name, default):
-    value = args.get(name) if isinstance(args, dict) else getattr(args, name, None)
-    return default if value is None else value
 
 
 def scenario(duration: float):
@@ -101,11 +97,11 @@ def cold_compile_s() -> tuple:
 
 
 def run(args=None) -> dict:
-    duration = float(_get(args, 'duration', 10.0))
-    repeats = int(_get(args, 'repeats', 5))
+    duration = float(_arg(args, 'duration', 10.0))
+    repeats = int(_arg(args, 'repeats', 5))
     res = {'batch_simulated_s': duration, 'batch_repeats': repeats,
            'load_avg_1min_before': os.getloadavg()[0]}
-    if _get(args, 'cold_compile', True):
+    if _arg(args, 'cold_compile', True):
         res['batch_jit_cold_compile_s'], res['batch_jit_cold_compile_cpu_s'] = cold_compile_s()
     # warm: load the cached kernels (first call per signature), not counted below
     loop, refs, loads = build(scenario(0.05))

@@ -20,18 +20,15 @@ import time
 
 import numpy as np
 
-
-def _get(args, name, default):
-    value = args.get(name) if isinstance(args, dict) else getattr(args, name, None)
-    return default if value is None else value
+from . import arg as _arg
 
 
 def run(args) -> dict:
     from ..core.sim import campaign as C
     from ..core.sim import family as F
     from ..core.sim import scenarios as SC
-    n, workers = int(_get(args, 'runs', 270)), int(_get(args, 'workers', 2))
-    name = _get(args, 'scenario', 'sine')
+    n, workers = int(_arg(args, 'runs', 270)), int(_arg(args, 'workers', 2))
+    name = _arg(args, 'scenario', 'sine')
     scn = SC.load(name)
     fam_all = F.thesis()
     idx = np.linspace(0, len(fam_all['C_eq']) - 1, n).round().astype(int)

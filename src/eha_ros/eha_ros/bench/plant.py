@@ -11,14 +11,7 @@ from __future__ import annotations
 import math
 import time
 
-
-def _get(args, name, default):
-    if args is None:
-        return default
-    if isinstance(args, dict):
-        return args.get(name, default)
-    value = getattr(args, name, None)
-    return default if value is None else value
+from . import arg as _arg
 
 
 def run(args=None) -> dict:
@@ -27,9 +20,9 @@ def run(args=None) -> dict:
     from ..core.plant.parameters import nominal_plant
     from ..core.plant import layout as L
 
-    duration = float(_get(args, 'duration', 5.0))
-    repeats = int(_get(args, 'repeats', 5))
-    substeps = int(_get(args, 'substeps', 16))
+    duration = float(_arg(args, 'duration', 5.0))
+    repeats = int(_arg(args, 'repeats', 5))
+    substeps = int(_arg(args, 'substeps', 16))
     params = nominal_plant({'plant.sim.substeps': substeps})
     plant = EhaPlant(params, seed=1)
     n = int(round(duration / plant.Ts))
@@ -77,8 +70,8 @@ def run(args=None) -> dict:
         'plant_closed_loop_sim_s_per_wall_s': duration / closed_wall,
         'plant_closed_loop_us_per_tick': closed_wall / n * 1e6,
     }
-    if not _get(args, 'batch_only', False):
-        result.update(node_realtime(float(_get(args, 'duration', 10.0))))
+    if not _arg(args, 'batch_only', False):
+        result.update(node_realtime(float(_arg(args, 'duration', 10.0))))
     return result
 
 

@@ -13,10 +13,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..plant.parameters import PlantParams
-from ..stats import Counters
 import numpy as np
 
+from ..plant.parameters import PlantParams
+from ..stats import Counters
 from . import adapt
 from . import fault_detector as fd
 from . import kernels
@@ -77,13 +77,9 @@ def build_filter(p: dict):
         m = e + 'model.'
         # the adaptive flow parameters need the measured pressures (the flow balance): none
         # with position-only measurements, where they are unobservable
-        lam = ((p[m + 'q_leakage'], p[m + 'p0_leakage'], *p[m + 'leakage_range'])
-               if p[m + 'adapt_leakage'] and with_p else None)
-        dlt = ((p[m + 'q_displacement'], p[m + 'p0_displacement'],
-                *p[m + 'displacement_range']) if p[m + 'adapt_displacement'] and with_p
-               else None)
-        kap = ((p[m + 'q_compliance'], p[m + 'p0_compliance'], *p[m + 'compliance_range'])
-               if p[m + 'adapt_compliance'] and with_p else None)
+        lam, dlt, kap = (((p[m + 'q_' + k], p[m + 'p0_' + k], *p[m + k + '_range'])
+                          if p[m + 'adapt_' + k] and with_p else None)
+                         for k in ('leakage', 'displacement', 'compliance'))
         kf = ChamberKF(circuit(pp), pp.Ts, q, p[e + 'model.p0'], R_pos,
                        p[e + 'noise.pressure_sigma'] ** 2 if with_p else None, gm,
                        F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
@@ -127,10 +123,9 @@ class Estimator:
         self.p_max = params[e + 'validity.pressure_max']
         self.w_max = params[e + 'validity.max_abs_motor_speed']
         self.isolate = params[e + 'fault.isolate']
-        self.alpha_pd = 1.0 - math.exp(-2.0 * math.pi * params[e + 'model.pressure_lowpass']
-                                       * self.Ts)
+        self.alpha_pd = adapt.lowpass_alpha(params[e + 'model.pressure_lowpass'], self.Ts)
         fc = params[e + 'model.friction_lowpass']
-        self.alpha_wf = 1.0 - math.exp(-2.0 * math.pi * fc * self.Ts) if fc > 0 else 1.0
+        self.alpha_wf = adapt.lowpass_alpha(fc, self.Ts) if fc > 0 else 1.0
         self.detector = fd.FaultDetector.from_params(params, self.Ts)
         mk = np.zeros(adapt.NMK)                   # consistency monitor (adapt.monitor)
         mk[adapt.MK_ALPHA] = adapt.lowpass_alpha(params[e + 'monitor.lowpass'], self.Ts)

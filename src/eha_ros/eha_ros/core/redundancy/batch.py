@@ -34,11 +34,15 @@ def switch_params(overrides: dict | None = None) -> dict:
 def make_controller(Ts: float):
     """The controller node's PositionController from the YAML it loads (not hardcoded)."""
     from ..controller.params import SCHEMA as CSCHEMA
-    from ..controller.position import PositionController
     p = load(CSCHEMA, [config('plant.yaml'), config('controller.yaml'),
                        config('controller_node.yaml')], node='controller')
-    ctl = PositionController.from_params(p)
-    return ctl, int(round(p['control.switch_hold'] / Ts))
+    return controller_from_params(p, Ts)
+
+
+def controller_from_params(p: dict, Ts: float):
+    """(PositionController, integrator hold on a switch in ticks) from controller parameters."""
+    from ..controller.position import PositionController
+    return PositionController.from_params(p), int(round(p['control.switch_hold'] / Ts))
 
 
 def make_estimator():

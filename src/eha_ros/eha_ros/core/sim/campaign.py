@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cli import UsageError
+from ..report import write_json
 from . import family as FAM
 from . import scenarios as SC
 
@@ -71,14 +72,13 @@ def run_chunk(scn_doc: dict, nominal: dict, rows: list, trace: bool = True):
     """Worker task: the runs of one chunk. rows: dicts with ID_COLUMNS and any extra per-plant
     columns (linear predictions). Returns (row dicts with figures, traces or None)."""
     import traceback
-    scn = SC.from_dict({k: scn_doc[k] for k in ('name', 'kind', 'description', 'params',
-                                                 'specs')})
+    scn = SC.from_saved(scn_doc)
     out, traces = [], []
     for row in rows:
         t0 = time.perf_counter()
         r = dict(row)
         try:
-            figs, tr = SC.run(scn, nominal, row, int(row['seed']), extra=row, trace=trace)
+            figs, tr = SC.run(scn, nominal, row, int(row['seed']), trace=trace)
             r.update(figs)
             r['passed'], r['failed_specs'] = SC.judge(r, scn.specs)
             r['error'] = ''
@@ -179,10 +179,9 @@ class Progress:
             self.last = now
             rate = (self.done - self.start_done) / now if now > 0 else 0.0
             eta = (self.total - self.done) / rate if rate > 0 else math.inf
+            tail = f', ETA {eta:.0f} s' if math.isfinite(eta) else ''
             print(f'{self.label}: {self.done}/{self.total} runs, {self.failed} failed, '
-                  f'{now:.0f} s, ETA {eta:.0f} s' if math.isfinite(eta) else
-                  f'{self.label}: {self.done}/{self.total} runs, {self.failed} failed, '
-                  f'{now:.0f} s', file=sys.stderr, flush=True)
+                  f'{now:.0f} s{tail}', file=sys.stderr, flush=True)
 
     def close(self):
         if self.bar is not None:
@@ -210,11 +209,7 @@ def read_parts(out_dir: str, with_traces: bool = True):
     """(rows DataFrame, [(run_id, trace dict)]) of every finished chunk in DIR/parts."""
     import pandas as pd
     files = sorted(glob.glob(os.path.join(out_dir, 'parts', 'chunk-*.parquet')))
-    frames = [pd.read_parquet(f) for f in files]
-    df = (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame())
-    if len(df):
-        df = df.drop_duplicates('run_id', keep='last').sort_values('run_id')
-        df = df.reset_index(drop=True)
+    df = by_run([pd.read_parquet(f) for f in files])
     pairs = []
     for f in sorted(glob.glob(os.path.join(out_dir, 'parts', 'chunk-*.npz'))) \
             if with_traces else ():
@@ -224,6 +219,16 @@ def read_parts(out_dir: str, with_traces: bool = True):
             for i, rid in enumerate(z['run_id']):
                 pairs.append((int(rid), {k: cols[k][i] for k in keys}))
     return df, pairs
+
+
+def by_run(frames: list):
+    """One row table of row frames: each run once (the latest), sorted by run id."""
+    import pandas as pd
+    frames = [f for f in frames if len(f)]
+    if not frames:
+        return pd.DataFrame()
+    df = pd.concat(frames, ignore_index=True).drop_duplicates('run_id', keep='last')
+    return df.sort_values('run_id').reset_index(drop=True)
 
 
 def merge_traces(pairs: list):
@@ -239,24 +244,6 @@ def merge_traces(pairs: list):
         if k != 't':
             out[k] = np.array([np.asarray(tr[k][:m], float) for _, tr in pairs])
     return out
-
-
-def _write_json(path: str, obj: dict) -> None:
-    tmp = path + '.tmp'
-    with open(tmp, 'w') as f:
-        json.dump(obj, f, indent=2, sort_keys=True, default=_jsonable)
-        f.write('\n')
-    os.replace(tmp, path)
-
-
-def _jsonable(o):
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 def default_out(scenario: str, family: str) -> str:
@@ -307,8 +294,8 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
     if SC.linear_columns(scn):
         from . import linear
         lin = linear.predict(table[list(FAM.NAMES)].to_numpy(),
-                             freqs_hz=scn.params.get('freqs', (1, 2, 4, 7, 10, 15)),
-                             stiff_freqs_hz=scn.params.get('freqs', (1, 4, 7)),
+                             freqs_hz=scn.params.get('freqs', linear.FREQS_HZ),
+                             stiff_freqs_hz=scn.params.get('freqs', linear.STIFF_FREQS_HZ),
                              load_step_n=scn.params.get('force', 5e3),
                              plant=nominal['plant_sim'], controller=nominal['controller'])
         for k, v in lin.items():
@@ -332,7 +319,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         info = dict(scenario=scn.as_dict(), family=family, seed=int(seed), count=n,
                     workers=n_workers, scheduler=scheduler or 'LocalCluster',
                     dashboard=getattr(client, 'dashboard_link', ''), complete=False)
-        _write_json(os.path.join(out, 'campaign.json'), dict(info, passed=0, failed=0))
+        write_json(os.path.join(out, 'campaign.json'), dict(info, passed=0, failed=0), True)
         label = f'campaign {scn.name}'
         log(f'{label}: {len(todo)} of {n} runs ({family}, seed {seed}) on {n_workers} '
             f'worker(s), {scheduler or "LocalCluster"}; dashboard {info["dashboard"]}; '
@@ -349,15 +336,12 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
             from distributed import as_completed
             scn_f, nom_f = scn.as_dict(), nominal     # small: sent with each task
             recs = table.to_dict('records')
-            futures = {}
-            for j, g in enumerate(groups):
-                rows = [recs[i] for i in g]
-                f = client.submit(run_chunk, scn_f, nom_f, rows, trace, pure=False,
-                                  key=f'campaign-{scn.name}-{os.getpid()}-{g[0]}-'
-                                      f'{time.monotonic_ns()}', retries=1)
-                futures[f] = j
+            futures = [client.submit(run_chunk, scn_f, nom_f, [recs[i] for i in g], trace,
+                                     pure=False, retries=1,
+                                     key=f'campaign-{scn.name}-{os.getpid()}-{g[0]}-'
+                                         f'{time.monotonic_ns()}') for g in groups]
             try:
-                for f in as_completed(list(futures)):
+                for f in as_completed(futures):
                     rows, traces = f.result()
                     _write_part(parts, rows, traces)
                     new_rows.extend(rows)
@@ -367,18 +351,13 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
                     bar.update(len(rows), sum(not r['passed'] for r in rows))
             except KeyboardInterrupt:
                 interrupted = True
-                client.cancel(list(futures))
+                client.cancel(futures)
         bar.close()
         wall = time.monotonic() - t_start
         if interrupted:          # the parts on disk are the truth (a chunk may be half-noted)
             df, pairs = read_parts(out)
         else:
-            frames = [x for x in (done_df, pd.DataFrame(new_rows)) if len(x)]
-            df = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
-            if len(df):
-                df = df.drop_duplicates('run_id', keep='last').sort_values('run_id')
-                df = df.reset_index(drop=True)
-            pairs = done_traces + new_traces
+            df, pairs = by_run([done_df, pd.DataFrame(new_rows)]), done_traces + new_traces
         traces = merge_traces(pairs)
         passed = int(df['passed'].astype(bool).sum()) if len(df) else 0
         plant_s = float(df['plant_s'].sum()) if 'plant_s' in df else 0.0
@@ -394,7 +373,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         df.to_parquet(os.path.join(out, 'results.parquet'), index=False)
         if traces is not None:
             np.savez(os.path.join(out, 'traces.npz'), **traces)
-        _write_json(os.path.join(out, 'campaign.json'), info)
+        write_json(os.path.join(out, 'campaign.json'), info, True)
         if report and len(df):
             from .report import write_report
             write_report(out, info, df, traces)
@@ -421,8 +400,7 @@ def _resume_inputs(out: str, scenario: str | None):
     except (OSError, ValueError) as err:
         raise UsageError(f'--resume {out}: not a campaign folder ({err.__class__.__name__}: '
                          f'{str(err).splitlines()[0][:120]})')
-    scn = SC.from_dict({k: info['scenario'][k] for k in ('name', 'kind', 'description',
-                                                          'params', 'specs')}, path)
+    scn = SC.from_saved(info['scenario'], path)
     if scenario and scenario not in (scn.name, scn.path) and \
             os.path.splitext(os.path.basename(scenario))[0] != scn.name:
         raise UsageError(f'--resume {out}: that campaign ran scenario {scn.name!r}, not '

@@ -157,6 +157,11 @@ def from_dict(doc, path: str = '<dict>') -> Scenario:
     return scn
 
 
+def from_saved(doc: dict, path: str = '<saved>') -> Scenario:
+    """The scenario of Scenario.as_dict() (campaign.json, a task's payload)."""
+    return from_dict({k: v for k, v in doc.items() if k != 'duration'}, path)
+
+
 def _num(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
@@ -224,25 +229,21 @@ def build_loop(nominal: dict, plant: dict, seed: int, faults=None, commands=None
     """The stack's batch loop on one plant: plant from ``plant`` (the variant), estimator,
     controller and switch manager from ``nominal`` (dicts of node parameters)."""
     from ..batch import BatchLoop
-    from ..controller.position import PositionController
     from ..estimator.estimator import Estimator
+    from ..redundancy.batch import controller_from_params
     from ..plant import EhaPlant
     from ..redundancy.state_machine import SwitchManager
     pl = EhaPlant(plant, seed=seed)
     pl.reset(position=plant['sim_node.initial_position'])
-    c = nominal['controller']
-    ctl = PositionController.from_params(c)
-    hold = int(round(c['control.switch_hold'] / pl.Ts))
+    ctl, hold = controller_from_params(nominal['controller'], pl.Ts)
     return BatchLoop(pl, Estimator(nominal['estimator']), ctl,
                      SwitchManager(nominal['switch_manager']), hold, faults, commands)
 
 
-def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int,
-        extra: dict | None = None, trace: bool = True):
+def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool = True):
     """One run; returns (figures dict, decimated traces dict or None).
 
-    multipliers: one family row (core.sim.family.COLUMNS); extra: per-plant columns the
-    specs may refer to (e.g. lin_peak_deviation_m from core.sim.linear)."""
+    multipliers: one family row (core.sim.family.COLUMNS; other keys are ignored)."""
     from ..closed_loop import R_ACTIVE, R_EN, R_FAULT, R_STATE, R_U, R_VALVE, R_X0, R_XHAT, R_XM
     from ..redundancy.batch import schedule
     from .family import plant_params
@@ -373,22 +374,24 @@ def sine_figures(s, p, Ts):
             'tracking_rmse_m': float(np.sqrt(np.mean((x - s['reference'][w]) ** 2)))}
 
 
-def switch_figures(s, p, Ts):
-    """Table 3.4 figures of the switch (core.redundancy.batch.tracking_figures)."""
+def handover_figures(s, p, t_event: float):
+    """Figures of a hand-over to couple B at t_event while tracking a sine (Table 3.4): the
+    tracking figures of core.redundancy.batch, the time until B drives, the final channel."""
     from ..redundancy.batch import driving_time, tracking_figures
-    f = tracking_figures(s['t'], s['truth'], s['reference'], p['switch_time'], 1.0 / p['freq'])
-    f['drive_time_s'] = driving_time(s['t'], s['valve'], s['enable'], 1, p['switch_time'])
+    f = tracking_figures(s['t'], s['truth'], s['reference'], t_event, 1.0 / p['freq'])
+    f['drive_time_s'] = driving_time(s['t'], s['valve'], s['enable'], 1, t_event)
     f['final_channel'] = float(s['active'][-1])
     return f
+
+
+def switch_figures(s, p, Ts):
+    """Table 3.4: the commanded switch."""
+    return handover_figures(s, p, p['switch_time'])
 
 
 def motor_fail_figures(s, p, Ts):
-    """Motor failure of the active couple: time until the other couple drives, tracking."""
-    from ..redundancy.batch import driving_time, tracking_figures
-    f = tracking_figures(s['t'], s['truth'], s['reference'], p['t_fault'], 1.0 / p['freq'])
-    f['drive_time_s'] = driving_time(s['t'], s['valve'], s['enable'], 1, p['t_fault'])
-    f['final_channel'] = float(s['active'][-1])
-    return f
+    """Motor failure of the active couple: the automatic switch."""
+    return handover_figures(s, p, p['t_fault'])
 
 
 def sensor_fault_figures(s, p, Ts):
