@@ -3,15 +3,20 @@
 the batch loop), warm numba cache; speedup = the ratio of their plant-seconds per wall-second,
 measured in the same run.
 
-Keys: campaign_plant_s_per_wall_s, single_process_plant_s_per_wall_s, speedup, runs,
-plant_s (simulated seconds in all), cluster_start_s (LocalCluster up, workers running),
-worker_warmup_s (a new worker's first run: imports and the numba kernels from the disk cache),
-first_row_s (from the call to the first finished chunk), campaign_wall_s, single_wall_s.
+Both are measured ``repeats`` times in turns (the whole campaign, then every third of its
+plants in this process), because on a shared machine one stretch can be 20 % slower than the
+next; the rates are the medians over the repeats.
+
+Keys: campaign_plant_s_per_wall_s, single_process_plant_s_per_wall_s, speedup (ratio of the
+medians), speedup_each (each repeat's pair), runs, plant_s (simulated seconds of one campaign),
+cluster_start_s (LocalCluster up, workers running), worker_warmup_s (a new worker's first run:
+imports and the numba kernels from the disk cache), first_row_s (from the call to the first
+finished chunk), campaign_wall_s, single_wall_s_per_run.
 The timed campaign runs on an already started and warmed-up cluster, as a long campaign
 sees it; the cold-start keys say what a fresh cluster adds once.
 
-``run(args)``: args may carry ``duration`` (ignored), ``runs`` (default 270: the thesis family), ``workers`` (2),
-``scenario`` ('sine': 30 s runs of the 1 Hz sine).
+``run(args)``: args may carry ``duration`` (ignored), ``runs`` (default 270: the thesis
+family), ``workers`` (2), ``scenario`` ('sine': 30 s runs of the 1 Hz sine), ``repeats`` (3).
 """
 from __future__ import annotations
 
@@ -21,6 +26,8 @@ import time
 import numpy as np
 
 from . import arg as _arg
+
+SUBSET = 3          # the single process runs every third plant of the campaign each repeat
 
 
 def run(args) -> dict:
@@ -38,33 +45,46 @@ def run(args) -> dict:
             for i in range(n)]
     C.run_chunk(scn.as_dict(), nominal, rows[:1])          # compile / load the cache here
 
+    reps = int(_arg(args, 'repeats', 3))
     t0 = time.perf_counter()
     client, cluster = C.connect(workers, None)
     start = time.perf_counter() - t0
+    camp, single, first = [], [], []
     try:
         t0 = time.perf_counter()
         client.run(lambda: C.run_chunk(scn.as_dict(), nominal, rows[:1]))   # warm each worker
         warm = time.perf_counter() - t0
-        with tempfile.TemporaryDirectory() as d:
+        for rep in range(reps):
+            # in turns, so a slower stretch of a shared machine hits both sides alike
+            with tempfile.TemporaryDirectory() as d:
+                t0 = time.perf_counter()
+                res = C.run_campaign(name, fam, out=f'{d}/c', client=client, progress=False,
+                                     report=False, log=lambda s: None)
+                wall = time.perf_counter() - t0
+            camp.append((float(res.results['plant_s'].sum()), wall))
+            first.append(res.info['first_row_s'])
+            sub = rows[rep % SUBSET::SUBSET]
             t0 = time.perf_counter()
-            res = C.run_campaign(name, fam, out=f'{d}/c', client=client, progress=False,
-                                 report=False, log=lambda s: None)
-            camp_wall = time.perf_counter() - t0
+            out, _ = C.run_chunk(scn.as_dict(), nominal, sub)
+            single.append((sum(r['plant_s'] for r in out), time.perf_counter() - t0))
+            print(f'bench campaign: repeat {rep + 1}/{reps}: campaign '
+                  f'{camp[-1][0] / camp[-1][1]:.1f}, single process '
+                  f'{single[-1][0] / single[-1][1]:.1f} plant-s per wall-s', flush=True)
     finally:
         client.close()
         cluster.close()
-    plant_s = float(res.results['plant_s'].sum())
-
-    t0 = time.perf_counter()
-    out, _ = C.run_chunk(scn.as_dict(), nominal, rows)
-    single_wall = time.perf_counter() - t0
-    single_plant_s = sum(r['plant_s'] for r in out)
-    camp_rate = plant_s / camp_wall
-    single_rate = single_plant_s / single_wall
-    return {'scenario': name, 'runs': n, 'workers': workers, 'plant_s': plant_s,
+    camp_rate = float(np.median([p / w for p, w in camp]))
+    single_rate = float(np.median([p / w for p, w in single]))
+    return {'scenario': name, 'runs': n, 'workers': workers, 'repeats': reps,
+            'plant_s': camp[0][0],
             'campaign_plant_s_per_wall_s': round(camp_rate, 2),
             'single_process_plant_s_per_wall_s': round(single_rate, 2),
             'speedup': round(camp_rate / single_rate, 3),
-            'campaign_wall_s': round(camp_wall, 3), 'single_wall_s': round(single_wall, 3),
-            'first_row_s': res.info['first_row_s'], 'cluster_start_s': round(start, 3),
+            'speedup_each': [round((pc / wc) / (ps / ws), 3)
+                             for (pc, wc), (ps, ws) in zip(camp, single)],
+            'campaign_wall_s': round(float(np.median([w for _, w in camp])), 3),
+            'single_wall_s_per_run': round(float(np.median([w for _, w in single])) /
+                                           len(rows[::SUBSET]), 4),
+            'first_row_s': round(float(np.median(first)), 3),
+            'cluster_start_s': round(start, 3),
             'worker_warmup_s': round(warm, 3), 'failed_runs': res.info['failed']}

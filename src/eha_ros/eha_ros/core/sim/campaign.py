@@ -103,11 +103,21 @@ def _free_port(port: int) -> bool:
             return False
 
 
+# A campaign worker computes: its event loop thread wakes less (statistical profiler every
+# 10 ms, loop tick every 20 ms, system monitor every 0.5 s by default), each wake taking the
+# GIL from the run. Measured on 1 worker, the same 30 runs in turns as a task and inside the
+# worker's loop: the task took 7.5 % longer with the defaults, 0 % with these.
+QUIET_WORKER = {'distributed.worker.profile.enabled': False,
+                'distributed.admin.tick.interval': '1s',
+                'distributed.admin.system-monitor.interval': '2s'}
+
+
 def connect(workers: int | None, scheduler: str | None, quiet: bool = False):
     """(client, cluster or None): a LocalCluster of ``workers`` single-threaded processes, or
     a client of the running scheduler at ``scheduler``; UsageError when it cannot be reached."""
     import logging
 
+    import dask
     from distributed import Client, LocalCluster
     logging.getLogger('distributed').setLevel(logging.ERROR)
     if scheduler:
@@ -127,9 +137,10 @@ def connect(workers: int | None, scheduler: str | None, quiet: bool = False):
     main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=':8787' if _free_port(8787) else ':0',
-                               silence_logs=logging.ERROR)
+        with dask.config.set(QUIET_WORKER):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=':8787' if _free_port(8787) else ':0',
+                                   silence_logs=logging.ERROR)
     finally:
         if main:
             signal.signal(signal.SIGINT, old)
