@@ -50,15 +50,26 @@ def test_table_3_4_bit_identical(table_3_4):
 
 def test_timed_sensor_faults_and_rejections_bit_identical():
     """Fault expiry (msp_noise, msp_drift, stuck pressures), rejected pressures (Python ticks
-    inside a run), a refused command and commands in a row."""
+    inside a run), a refused command and commands in a row; the 2 mm drift is a position
+    fault: the safe state (core.safe_state), found by a compiled tick that is rolled back and
+    done again in Python."""
     scn = B.Scenario(duration=2.4, faults=[(0.5, 'msp_noise', 0, 5e-5, 0.7),
                                            (1.0, 'msp_drift', 0, 2e-3, 0.8),
                                            (1.8, 'pressure_sensor', 0, math.nan, 0.1)],
-                     commands=[(1.2, 1, 'first'), (1.21, 0, 'refused'), (2.0, 0, 'back')])
+                     commands=[(0.3, 1, 'first'), (0.31, 0, 'refused'), (2.0, 0, 'back')])
     ref, fast = (B.run(scn, switch_hold=0.02, fast=f) for f in (False, True))
     assert same(ref, fast) == []
     assert events(ref) == events(fast)
-    assert 'refused' in [e['kind'] for e in events(ref)]
+    kinds = [e['kind'] for e in events(ref)]
+    assert 'refused' in kinds
+    # the 2 mm drift, then its end (the reading jumps back 2 mm while the estimate is away):
+    # a position fault, the safe state: hydraulic lock and zero speed
+    safe = [e for e in ref['manager'].events if e.kind == 'safe']
+    print([(e.t, e.reason) for e in safe])
+    assert safe and 'position fault' in safe[0].reason
+    assert 1.0 < safe[0].t < 1.9 and ref['manager'].state == 'FAILED_SAFE'
+    locked = np.asarray(ref['t']) > safe[0].t + 0.0015
+    assert np.all(np.asarray(ref['w_ref'])[locked] == 0.0)
     assert ref['responses'] == fast['responses']
     # the estimator isolates the position sensor while it reports a jump or a stuck sensor
     # (estimator.fault.isolate): those ticks (msp_noise, msp_drift + hold) run in Python

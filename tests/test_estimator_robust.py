@@ -13,7 +13,7 @@ import pytest
 from scipy.linalg import expm
 
 from eha_ros.core.batch import BatchLoop, BatchStack, node_params
-from eha_ros.core.closed_loop import R_FAULT, R_X, R_XHAT, R_XM
+from eha_ros.core.closed_loop import R_FAULT, R_U, R_X, R_XHAT, R_XM
 from eha_ros.core.estimator import adapt, tuning
 from eha_ros.core.estimator import fault_detector as fd
 from eha_ros.core.estimator.chamber_kf import ChamberKF, continuous, leak_sensitivity
@@ -160,7 +160,8 @@ def test_estimate_stays_near_the_sensor_beyond_the_adaptation_range():
 def test_sensor_fault_detected_isolated_and_told_from_mismatch(scale, fault, code):
     """1 mm bias / stuck sensor at 2 s during the 1 Hz 5 mm sine: reported within 50 ms as
     a sensor fault; the estimator isolates the sensor (predict-only on the adapted model), so
-    the piston does not follow the faulty reading."""
+    the piston does not follow the faulty reading, and the controller goes to the safe state
+    (core.safe_state: zero speed; no switch manager here, so no valve lock)."""
     s = stack(scale, seed=3, faults={2000: [fault]})
     n = 2300
     t = np.arange(n) * 1e-3
@@ -178,7 +179,15 @@ def test_sensor_fault_detected_isolated_and_told_from_mismatch(scale, fault, cod
           f'{adapt.VERDICTS[s.estimator.consistency]}')
     assert delay <= 0.050
     assert s.estimator.consistency == adapt.SENSOR and s.estimator.safe_state_required
-    assert after < before + 0.1e-3      # isolated: the piston does not follow the bad reading
+    u, x = rec[:, R_U], rec[:, R_X]
+    held = np.nonzero((t >= 2.0) & (u == 0.0))[0]
+    assert held.size and np.all(u[held[0]:] == 0.0) and t[held[0]] - 2.0 <= 0.050
+    assert s._loop.holding
+    # isolated, then held: the piston neither follows the bad reading nor keeps moving
+    assert err[(t >= 2.0) & (t <= t[held[0]])].max() < before + 0.1e-3
+    assert np.abs(x[held[0]:] - x[held[0]]).max() < 0.3e-3
+    print(f'safe state {(t[held[0]] - 2.0) * 1e3:.0f} ms after the fault; piston moved '
+          f'{np.abs(x[held[0]:] - x[held[0]]).max() * 1e6:.0f} um after it')
 
 
 def test_monitor_verdicts_hold_and_severity():
@@ -189,10 +198,15 @@ def test_monitor_verdicts_hold_and_severity():
     assert step(0.0, drift=True) == adapt.MODEL
     assert step(2e-4) == adapt.MODEL and step(2e-4) == adapt.DISAGREE
     assert step(0.0, drift=True) == adapt.DISAGREE      # a milder verdict does not replace it
-    assert step(0.0, code=fd.JUMP) == adapt.SENSOR
+    assert step(0.0, code=fd.STUCK) == adapt.SENSOR
     assert [step(0.0) for _ in range(4)] == [adapt.SENSOR, adapt.SENSOR, adapt.OK, adapt.OK]
-    assert adapt.safe_state(adapt.SENSOR) and adapt.safe_state(adapt.DISAGREE)
-    assert not adapt.safe_state(adapt.MODEL)
+    # a jump alone (a load step can pass for one) is not a sensor fault; with the
+    # disagreement it is
+    assert step(0.0, code=fd.JUMP) == adapt.OK
+    assert step(2e-4, code=fd.JUMP) == adapt.OK and step(2e-4, code=fd.JUMP) == adapt.SENSOR
+    assert adapt.safe_state(adapt.SENSOR) and not adapt.safe_state(adapt.DISAGREE)
+    assert adapt.alarm(adapt.SENSOR) and adapt.alarm(adapt.DISAGREE)
+    assert not adapt.safe_state(adapt.MODEL) and not adapt.alarm(adapt.MODEL)
 
 
 # ------------------------------------------------------------------ tuning

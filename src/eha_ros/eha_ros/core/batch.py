@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import safe_state as SAFE
+
 from .params import default_config_dir, load
 
 # node -> params files in config/ (later files override earlier ones); eha_ros.stack starts the
@@ -67,26 +69,27 @@ class BatchStack:
         self._loop = None
 
     def tick(self, reference: float, load: float = 0.0) -> Tick:
-        m = self.plant.measure()
-        tr = self.plant.truth()
-        est = self.estimator.update(m.position, m.motor_speed, m.pressure_a, m.pressure_b,
-                                    m.active_channel)
-        self.controller.request(reference)
-        out = self.controller.update(est.position)
-        rec = Tick(self.k, reference, m.position, est.position, tr.position, out.speed_ref,
-                   float(m.motor_speed[0]), float(m.motor_speed[1]), int(m.active_channel))
-        self.plant.step(out.speed_ref, load)
+        """One Ts by BatchLoop.tick (the stack's order and its safe state)."""
+        from .closed_loop import NREC, R_CHANNEL, R_U, R_WM, R_X0, R_XHAT, R_XM
+        row = np.zeros(NREC)
+        self.loop.tick(self.k, reference, load, row)
+        rec = Tick(self.k, reference, row[R_XM], row[R_XHAT], row[R_X0], row[R_U],
+                   row[R_WM], row[R_WM + 1], int(row[R_CHANNEL]))
         self.k += 1
         return rec
+
+    @property
+    def loop(self) -> 'BatchLoop':
+        if self._loop is None:
+            self._loop = BatchLoop(self.plant, self.estimator, self.controller)
+        return self._loop
 
     def run(self, references, loads=None, fast: bool = True) -> dict:
         """Ticks self.k .. self.k + n - 1 for arrays of n references (and loads), what n
         :meth:`tick` calls do, in compiled segments (BatchLoop): arrays named as Tick's fields."""
         from .closed_loop import R_CHANNEL, R_U, R_WM, R_X0, R_XHAT, R_XM
-        if self._loop is None:
-            self._loop = BatchLoop(self.plant, self.estimator, self.controller)
         refs = np.ascontiguousarray(references, dtype=float)
-        rec = self._loop.run(refs, loads, fast=fast, k0=self.k).T
+        rec = self.loop.run(refs, loads, fast=fast, k0=self.k).T
         out = {'seq': np.arange(self.k, self.k + len(refs)), 'reference': refs.copy(),
                'measured': rec[R_XM].copy(), 'estimate': rec[R_XHAT].copy(),
                'truth': rec[R_X0].copy(), 'command': rec[R_U].copy(),
@@ -124,6 +127,7 @@ class BatchLoop:
         self.last_status = (manager.active, manager.state) if manager is not None else None
         self.responses = []                # (tick, 'fault' | 'command', (ok, message))
         self.segments = self.fast_ticks = 0
+        self.holding = False               # controller in the safe state (core.safe_state)
 
     # ------------------------------------------------------------------ reference tick
     def tick(self, k: int, reference: float, load: float, row) -> None:
@@ -144,9 +148,13 @@ class BatchLoop:
             x_hat, nis, innov = r.position, r.nis, r.innovation
             code, nd = r.sensor_fault, r.nis_dim
             est_ok = r.nis_dim > 0 and not r.sensor_fault
+            verdict = r.consistency
         else:
             x_hat, nis, est_ok, innov, code, nd = m.position, math.nan, False, math.nan, 0, 0
+            verdict = 0
         ctl.request(reference)
+        if mgr is not None and SAFE.position_fault(verdict):
+            mgr.position_fault(SAFE.manager_reason(verdict))
         for ch, why in self.commands.get(k, ()):
             self.responses.append((k, 'command', mgr.request(ch, why)))
         if mgr is not None:
@@ -161,7 +169,13 @@ class BatchLoop:
             if status != last and (status[0] != last[0] or mgr.state == 'SWITCHING'):
                 ctl.hold_integrator(self.hold_ticks)   # as the controller node on /eha/redundancy
             self.last_status = status
-        u = ctl.update(x_hat).speed_ref
+        if SAFE.controller_holds(verdict, mgr.state if mgr is not None else None):
+            u, self.holding = 0.0, True
+        else:
+            if self.holding:
+                self.holding = False
+                ctl.start(x_hat)                # bumpless, as the controller node
+            u = ctl.update(x_hat).speed_ref
         plant.step(u, load)
         self.u = u
         tr = plant.truth()
@@ -216,7 +230,8 @@ class BatchLoop:
         """Cheap Python-side check before packing: nothing that surely needs a Python tick."""
         est = self.est
         return (est is None or (est.started and est._saved is None and
-                                not (est.isolate and est.detector.code))) and self.ctl.started
+                                not (est.isolate and est.detector.code))) and \
+            self.ctl.started and not self.holding
 
     def _segment(self, k: int, stop: int, off: int, refs, loads, rec) -> int:
         """Compiled ticks k .. stop-1 until one needs Python; returns that tick (or stop)."""

@@ -92,7 +92,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
     ck, cc, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt = ctl
     hk, mk, ms, hs, g = mgr
     keep = (x.copy(), Pe.copy(), ee.copy(), cc.copy(), Fx.copy(), Rx.copy(), ms.copy(),
-            hs.copy(), g.copy())
+            hs.copy(), g.copy(), Q.copy())
     w_meas = np.zeros(2)
     i_meas = np.zeros(2)
     reported = np.zeros(2, np.bool_)
@@ -114,7 +114,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
             return k, EVENT, u
         _copy(x, keep[0]); _copy(Pe, keep[1]); _copy(ee, keep[2]); _copy(cc, keep[3])  # noqa
         _copy(Fx, keep[4]); _copy(Rx, keep[5]); _copy(ms, keep[6]); _copy(hs, keep[7])  # noqa
-        _copy(g, keep[8])
+        _copy(g, keep[8]); _copy(Q, keep[9])  # noqa (Q: the estimator's adaptive noise levels)
         for c in range(2):
             w_meas[c] = meas[L.M_W0 + c]
             i_meas[c] = meas[L.M_I0 + c]
@@ -128,7 +128,8 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         else:
             x_hat, innov, nis, nd, code = pos, math.nan, math.nan, 0, 0
         CS.request(ck, cc, ref)
-        ok = math.isfinite(x_hat)
+        # a position fault (core.safe_state) is Python's: rolled back, then done by BatchLoop
+        ok = math.isfinite(x_hat) and not (has_est and ES.position_fault(ee))
         if ok and has_mgr:
             ok = RS.supervise(hk, mk, ms, hs, g, k * Ts, k, u, w_meas, i_meas, pa, pb,
                               reported, fault, innov, nd > 0 and code == 0, steady, age, cmd)
@@ -138,7 +139,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         if not math.isfinite(un):
             _copy(keep[0], x); _copy(keep[1], Pe); _copy(keep[2], ee); _copy(keep[3], cc)  # noqa
             _copy(keep[4], Fx); _copy(keep[5], Rx); _copy(keep[6], ms); _copy(keep[7], hs)  # noqa
-            _copy(keep[8], g)
+            _copy(keep[8], g); _copy(keep[9], Q)  # noqa
             return k, EVENT, u
         PS.step(S, P, U, T, nsub, block, meas, aux, ring, table, un, load)
         u = un

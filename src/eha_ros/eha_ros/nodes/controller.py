@@ -1,7 +1,9 @@
 """controller node: answers each eha/estimate with one eha/command (same seq) from the QFT
 position controller (core.controller.PositionController), follows eha/reference, holds its
 integrator through channel switches (eha/redundancy), and goes to zero speed when estimates
-stop or go stale for more than watchdog_ticks (recovering without a jump)."""
+stop or go stale for more than watchdog_ticks, or in the safe state (core.safe_state: the
+estimate reports a position fault or the switch manager is FAILED_SAFE); it recovers from
+both without a jump."""
 from __future__ import annotations
 
 import sys
@@ -32,6 +34,9 @@ def drive_mismatch(p: dict) -> float:
 
 
 def make_node(params: dict):
+    from ..core import safe_state as SAFE
+    from ..core.estimator.adapt import VERDICTS
+    from ..core.redundancy.state_machine import FAILED_SAFE
     Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, PositionEstimate, PositionReference,
                               RedundancyStatus)
@@ -52,6 +57,8 @@ def make_node(params: dict):
             self.switch_ticks = int(round(p['control.switch_hold'] / self.Ts))
             self.last_good = None          # monotonic time of the last fresh estimate
             self.tripped = False
+            self.safe = None                    # reason while in the safe state (core.safe_state)
+            self.manager_state = None           # from eha/redundancy
             self.last_seq = 0
             self.last_speed = 0.0
             self.answer = None                  # (seq, speed, saturated, stamp) of the last command
@@ -110,6 +117,7 @@ def make_node(params: dict):
             elif msg.state == 'SWITCHING':
                 self.ctl.hold_integrator(self.switch_ticks)
             self.active_channel = msg.active_channel
+            self.manager_state = msg.state
 
         def on_estimate(self, msg):
             """Lock-step with a tick-locked reference source (the sweep): estimate(k) waits for
@@ -145,11 +153,23 @@ def make_node(params: dict):
                 self.c.bump('stale_estimates')
             if fresh:
                 self.last_good = now
-                if self.tripped:
-                    self.tripped = False
+            if SAFE.controller_holds(msg.consistency, self.manager_state):
+                if self.safe is None:
+                    self.safe = (f'switch manager {self.manager_state}'
+                                 if self.manager_state == FAILED_SAFE else
+                                 f'estimate {VERDICTS[msg.consistency]}')
+                    self.c.bump('safe_state_entries')
+                    self.get_logger().error(f'seq {msg.seq}: safe state ({self.safe}): '
+                                            f'commanding zero motor speed')
+                speed, saturated = 0.0, False
+            elif fresh:
+                if self.tripped or self.safe is not None:
+                    self.get_logger().info(
+                        'estimates back: control resumed from the piston position'
+                        if self.tripped else f'safe state left ({self.safe} cleared): control '
+                        f'resumed from the piston position')
+                    self.tripped, self.safe = False, None
                     self.ctl.start(msg.position)       # bumpless: zero output, reference ramps
-                    self.get_logger().info('estimates back: control resumed from the piston '
-                                           'position')
                 out = self.ctl.update(msg.position)
                 speed, saturated = out.speed_ref, out.saturated
             elif self.tripped or self.last_good is None:
@@ -186,8 +206,13 @@ def make_node(params: dict):
         @diag.reader
         def publish_diagnostics(self):
             values = self.loop.values()
-            values.update(watchdog_tripped=self.tripped, drive_gain_mismatch=self.mismatch)
+            values.update(watchdog_tripped=self.tripped, drive_gain_mismatch=self.mismatch,
+                          safe_state=self.safe or '')
             values.update(self.c)
+            if self.safe is not None:
+                diag.publish(self, self.pub_diag, 'loop', values, diag.ERROR,
+                             f'safe state ({self.safe}): zero motor speed')
+                return
             warn = self.tripped or self.c.get('rejected_references', 0) > 0 or \
                 self.mismatch > self.p['control.drive_check_tolerance']
             diag.publish(self, self.pub_diag, 'loop', values, diag.WARN if warn else diag.OK,

@@ -99,8 +99,12 @@ def make_node(params: dict):
             self.verdict = verdict
             name = adapt.VERDICTS[verdict]
             if adapt.safe_state(verdict):
+                self.get_logger().error(f'seq {seq}: {name}: the position sensor is faulty '
+                                        f'(safe state required: core.safe_state)')
+            elif adapt.alarm(verdict):
                 self.get_logger().error(f'seq {seq}: {name}: filter and position sensor disagree '
-                                        f'beyond the sensor band (safe state required)')
+                                        f'beyond the sensor band (the estimate falls back on '
+                                        f'the sensor)')
             elif verdict == adapt.MODEL:
                 self.get_logger().warning(f'seq {seq}: model_mismatch (adaptive model at its '
                                           f'bound or persistent innovation bias)')
@@ -134,6 +138,7 @@ def make_node(params: dict):
             m.innovation, m.nis = r.innovation, r.nis
             m.stale, m.update_skipped = stale, r.update_skipped
             m.sensor_fault = int(r.sensor_fault)
+            m.consistency = int(r.consistency)
             self.pub.publish(m)
 
         @diag.reader
@@ -162,9 +167,12 @@ def make_node(params: dict):
             bad = self.stale or self.est.detector.code or self.c.get('rejected_states', 0)
             level = diag.WARN if bad else diag.OK
             msg = 'ok' if level == diag.OK else 'stale, sensor fault or measurements rejected'
-            if self.est.safe_state_required:
+            if adapt.alarm(self.est.consistency):
                 level = diag.ERROR
-                msg = f'{values["consistency"]}: filter and sensor disagree beyond the band'
+                msg = (f'{values["consistency"]}: ' +
+                       ('position sensor faulty, safe state required'
+                        if self.est.safe_state_required else
+                        'filter and sensor disagree beyond the band'))
             diag.publish(self, self.pub_diag, f'filter {self.get_namespace()}', values, level, msg)
 
     return EstimatorNode()

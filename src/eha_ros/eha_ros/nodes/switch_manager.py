@@ -29,6 +29,7 @@ def _finite(*values) -> bool:
 
 
 def make_node(params: dict):
+    from ..core import safe_state as SAFE
     Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, PositionEstimate,
                               RedundancyStatus)
@@ -97,6 +98,12 @@ def make_node(params: dict):
                 return
             self.innovation = float(msg.innovation)
             self.estimate_ok = not (msg.stale or msg.update_skipped or msg.sensor_fault)
+            if SAFE.position_fault(msg.consistency):
+                with self.lock:
+                    entered = self.mgr.position_fault(SAFE.manager_reason(msg.consistency))
+                if entered:
+                    self.c.bump('position_faults')
+                    self.flush()                 # the lock goes out now, logged once
 
         def on_state(self, msg):
             self.loop.timed(self.handle_state, msg)

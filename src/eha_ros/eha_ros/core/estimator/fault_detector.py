@@ -77,9 +77,12 @@ class FaultDetector:
         pz: the largest normalised pressure innovation of the same update (0: none)."""
         r = innovation / math.sqrt(S) if S > 0.0 else 0.0
         self.n_jump = self.n_jump + 1 if abs(r) > self.jump_threshold else 0
+        # a jump starts with a one-sample innovation step, and the pressures stay quiet
+        # through the debounce (a load step's pressure innovation can come a sample late)
         if self.n_jump == 1:
-            self.stepped = (abs(innovation - self.y_prev) >= self.jump_step and
-                            pz < self.jump_pressure_veto)
+            self.stepped = abs(innovation - self.y_prev) >= self.jump_step
+        if pz >= self.jump_pressure_veto:
+            self.stepped = False
         self.y_prev = innovation
         same = self.z_prev is not None and abs(z - self.z_prev) <= self.stuck_tolerance
         self.n_same = self.n_same + 1 if same else 0

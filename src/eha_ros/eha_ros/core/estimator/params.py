@@ -137,7 +137,7 @@ ESTIMATOR = Schema('estimator', [
           doc='a jump must begin with an innovation step of at least this within one sample '
               '(0: any); a smooth large innovation is a model mismatch, not a sensor jump'),
     Param(E + 'fault.jump_pressure_veto', 'float', '', 8.0, 0.0, 1e300,
-          doc='no jump when a pressure innovation of the same sample is above this '
+          doc='no jump when a pressure innovation of a debounce sample is above this '
               '(normalised): the piston moved by compressing the oil, the sensor did not jump'),
     Param(E + 'fault.stuck_samples', 'int', 'samples', 10, 2, 1000000,
           doc='identical consecutive readings of the noisy sensor that mean stuck'),

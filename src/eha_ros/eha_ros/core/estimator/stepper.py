@@ -155,6 +155,12 @@ def unpack(est, e) -> None:
 
 
 @njit(cache=True)
+def position_fault(e) -> bool:
+    """This tick's consistency verdict calls for the safe state (core.safe_state)."""
+    return adapt.safe_state(int(e[E_MON + adapt.MS_VERDICT]))
+
+
+@njit(cache=True)
 def ready(k, e, position, w, pa, pb) -> bool:
     """This measurement takes the common path (nothing to count, no reason to report)."""
     if not (math.isfinite(w) and abs(w) <= k[K_WMAX]):
@@ -197,8 +203,9 @@ def detect(k, e, z, innovation, S, pz) -> None:
     r = innovation / math.sqrt(S) if S > 0.0 else 0.0
     e[E_NJUMP] = e[E_NJUMP] + 1 if abs(r) > k[K_JUMP] else 0
     if e[E_NJUMP] == 1:
-        e[E_STEPPED] = 1.0 if (abs(innovation - e[E_YPREV]) >= k[K_JUMP_STEP] and
-                               pz < k[K_JUMP_PVETO]) else 0.0
+        e[E_STEPPED] = 1.0 if abs(innovation - e[E_YPREV]) >= k[K_JUMP_STEP] else 0.0
+    if pz >= k[K_JUMP_PVETO]:
+        e[E_STEPPED] = 0.0
     e[E_YPREV] = innovation
     same = e[E_HAS_ZPREV] > 0.5 and abs(z - e[E_ZPREV]) <= k[K_STUCK_TOL]
     e[E_NSAME] = e[E_NSAME] + 1 if same else 0

@@ -218,6 +218,14 @@ class SwitchManager:
         self._event('safe', from_state, self.active, self.active,
                     f'{why}; safe state {self.safe_mode}')
 
+    def position_fault(self, why: str) -> bool:
+        """The position feedback cannot be trusted (core.safe_state): the safe state, latched
+        like both couples failed. Returns True when this call entered it."""
+        if self.state == FAILED_SAFE:
+            return False
+        self._safe(why)
+        return True
+
     def _refuse(self, channel: int, reason: str, why: str) -> tuple[bool, str]:
         self._event('refused', self.name, self.active, channel,
                     f'commanded switch to {NAMES[channel]} ({reason}) refused: {why}',

@@ -396,14 +396,24 @@ def motor_fail_figures(s, p, Ts):
 
 def sensor_fault_figures(s, p, Ts):
     """Estimator's detection time of the injected sensor fault (inf: none; a fault at or after
-    the run's end is never injected: false_alarm), false alarms before it."""
+    the run's end is never injected: false_alarm), false alarms before it (a fault code or the
+    safe state); the safe state (core.safe_state): time from the fault to the hydraulic lock
+    (switch manager FAILED_SAFE, both couples' valves closed) and the piston's drift from
+    then to the end of the run."""
+    from ..redundancy.batch import STATE_CODES
     t, code = s['t'], s['fault']
     before = t < p['t_fault'] - 1e-9
     hits = np.nonzero((~before) & (code != 0))[0]
     err = np.abs(s['truth'][~before] - s['reference'][~before])
+    safe = s['state'] == STATE_CODES['FAILED_SAFE']
+    locked = np.nonzero((~before) & safe & np.all(s['valve'] <= 0.01, axis=0))[0]
+    lock = locked[0] if len(locked) else None
     return {'detection_time_s': float(t[hits[0]] - p['t_fault'] + Ts) if len(hits) else math.inf,
-            'false_alarm_ticks': float(np.count_nonzero(code[before] != 0)),
-            'peak_deviation_m': float(np.max(err)) if len(err) else math.nan}
+            'false_alarm_ticks': float(np.count_nonzero((code[before] != 0) | safe[before])),
+            'peak_deviation_m': float(np.max(err)) if len(err) else math.nan,
+            'safe_state_s': float(t[lock] - p['t_fault'] + Ts) if lock is not None else math.inf,
+            'lock_drift_m': float(abs(s['truth'][-1] - s['truth'][lock])) if lock is not None
+            else math.nan}
 
 
 FIGURES = {'step': step_figures, 'load_step': load_step_figures, 'sweep': sweep_figures,
