@@ -31,8 +31,8 @@ class Watch:
                                  lambda m: self.estimates.__setitem__(m.seq, m), big)
         node.create_subscription(ActuatorCommand, '/eha/command',
                                  lambda m: self.commands.__setitem__(m.seq, m), big)
-        node.create_subscription(PlantTruth, '/eha/sim/truth',
-                                 lambda m: self.truth.__setitem__(m.seq, m.position), big)
+        node.create_subscription(PlantTruth, '/eha/sim/truth', self.on_truth, big)
+        self.closed = {}                    # seq -> both pump valves closed (truth)
         keep = latched_qos()
         keep.depth = 100
         node.create_subscription(RedundancyStatus, '/eha/redundancy', self.status.append, keep)
@@ -41,6 +41,10 @@ class Watch:
         node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diag, 100)
         self.load = node.create_publisher(ExternalLoad, '/eha/sim/load_force', stream_qos())
         self.Load = ExternalLoad
+
+    def on_truth(self, m):
+        self.truth[m.seq] = m.position
+        self.closed[m.seq] = max(m.valve_fraction) < 0.01
 
     def on_diag(self, msg):
         for st in msg.status:
@@ -65,7 +69,7 @@ def test_stuck_sensor_leads_to_zero_speed_and_hydraulic_lock(ros_node, tmp_path)
                                                     magnitude=0.0, duration=0.0))
         assert wait_for(fut.done, 30) and fut.result().success, fut.result()
         k_fault = int(re.search(r'tick (\d+)', fut.result().message).group(1))
-        assert wait_for(lambda: w.tick() >= k_fault + 800, 120), 'loop stalled after the fault'
+        assert wait_for(lambda: w.tick() >= k_fault + 1000, 120), 'loop stalled after the fault'
         assert wait_for(lambda: any(s.state == 'FAILED_SAFE' for s in w.status), 10)
         assert wait_for(lambda: 'safe state' in getattr(
             w.diag.get('controller: loop'), 'message', ''), 10), \
@@ -99,19 +103,24 @@ def test_stuck_sensor_leads_to_zero_speed_and_hydraulic_lock(ros_node, tmp_path)
     log = {n: (tmp_path / f'{n}.log').read_text() for n in NODES}
     assert log['estimator'].count('sensor_fault: the position sensor is faulty') == 1, \
         log['estimator'][-2000:]
-    assert log['controller'].count('safe state (estimate sensor_fault)') == 1, \
+    # (its reason: the estimate, or the manager's FAILED_SAFE if that status came first)
+    assert log['controller'].count(': safe state (') == 1, \
         log['controller'][-2000:]
     assert log['switch_manager'].count('position fault') == 1, log['switch_manager'][-2000:]
     # the piston holds under 5 kN (truth; the sensor is stuck): sealed chambers, it creeps
-    # only by the cross-piston leakage, C_c (F / A_p) / A_p
+    # only by the cross-piston leakage, C_c (F / A_p) / A_p. The plant applies a channel
+    # select when it arrives (not tick-locked, unlike commands): the lock's tick over DDS
+    # depends on the machine (the batch campaigns give its time: 29 ms after a stuck sensor)
     from eha_ros.core.batch import node_params
     from eha_ros.core.plant_sim_params import SCHEMA
     p = node_params('plant_sim', SCHEMA)
     A_p = p['plant.cylinder.A_p']
     creep = p['plant.cylinder.C_c'] * (5e3 / A_p) / A_p
-    ks = [k for k in range(k_safe + 30, k_safe + 800) if k in w.truth]
+    k_lock = min(k for k, c in w.closed.items() if c and k >= k_safe)
+    assert k_lock - k_safe < 300, (k_safe, k_lock)
+    ks = [k for k in range(k_lock + 5, k_lock + 600) if k in w.truth]
     rate = abs(w.truth[ks[-1]] - w.truth[ks[0]]) / ((ks[-1] - ks[0]) * 1e-3)
     print(f'\nstuck sensor at tick {k_fault}: sensor_fault at {k_safe} '
-          f'(+{k_safe - k_fault} ticks); locked piston creeps {rate * 1e3:.3f} mm/s under 5 kN '
-          f'(cross-piston leakage: {creep * 1e3:.3f} mm/s)')
-    assert len(ks) > 500 and rate < 1.2 * creep
+          f'(+{k_safe - k_fault} ticks), valves closed at {k_lock}; the locked piston creeps '
+          f'{rate * 1e3:.3f} mm/s under 5 kN (cross-piston leakage: {creep * 1e3:.3f} mm/s)')
+    assert len(ks) > 400 and rate < 1.2 * creep
