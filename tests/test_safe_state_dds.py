@@ -74,6 +74,11 @@ def test_stuck_sensor_leads_to_zero_speed_and_hydraulic_lock(ros_node, tmp_path)
         assert wait_for(lambda: 'safe state' in getattr(
             w.diag.get('controller: loop'), 'message', ''), 10), \
             {k: v.message for k, v in w.diag.items()}
+        # ERROR on /diagnostics from estimator, controller and switch manager (each publishes
+        # on its own wall-clock period: lock-step can run 1000 ticks before the next one)
+        assert wait_for(lambda: {n for n in NODES[1:] if any(
+            k.startswith(n) and v.level == b'\x02' for k, v in w.diag.items())} ==
+            set(NODES[1:]), 15), {k: (v.level, v.message) for k, v in w.diag.items()}
     finally:
         st.stop(timeout=20)
     for n in NODES:
@@ -93,12 +98,6 @@ def test_stuck_sensor_leads_to_zero_speed_and_hydraulic_lock(ros_node, tmp_path)
     sel = w.selects[-1]
     assert list(sel.valve_open) == [False, False] and list(sel.drive_enable) == [False, False]
     assert not sel.bypass_open
-    # ERROR on /diagnostics from estimator, controller and switch manager
-    levels = {k: v.level for k, v in w.diag.items()}
-    for name in ('controller: loop',):
-        assert levels.get(name) == b'\x02', levels
-    assert any(k.startswith('switch_manager') and v == b'\x02' for k, v in levels.items()), levels
-    assert any(k.startswith('estimator') and v == b'\x02' for k, v in levels.items()), levels
     # logged once each
     log = {n: (tmp_path / f'{n}.log').read_text() for n in NODES}
     assert log['estimator'].count('sensor_fault: the position sensor is faulty') == 1, \
