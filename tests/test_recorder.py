@@ -205,8 +205,11 @@ def test_lockstep_runs_with_same_seed_record_identically(ros_node, tmp_path):
             if topic in PLANT_OWN:           # the start gate: from the first ticks
                 assert seqs[0] < 50, f'{topic}: recording starts at tick {seqs[0]}'
         common = sorted(set(pa[topic]) & set(pb[topic]))
-        assert len(common) >= (ticks - 50 if topic in PLANT_OWN else 0.75 * ticks), \
-            (topic, len(common))
+        # estimate and command start when DDS has matched their publishers to the recorder,
+        # which nothing gates (README): seen on the loaded CI machine from tick 304, and once
+        # from 1421 of 3100; 1000 common ticks still hold the second reference step
+        assert len(common) >= (ticks - 50 if topic in PLANT_OWN else 1000), \
+            (topic, len(common), common[:1])
         repeats = [k for k in common if len(pa[topic][k]) > 1 or len(pb[topic][k]) > 1]
         assert not repeats, f'{topic}: one seq with different payloads, e.g. {repeats[:5]}'
         diff = [k for k in common if pa[topic][k] != pb[topic][k]]
