@@ -96,7 +96,8 @@ def test_filter_matches_filterpy_joseph_form(params, measurements):
         assert nis == pytest.approx(float(f.y @ np.linalg.solve(f.S, f.y)), rel=1e-9)
     assert np.allclose(kf.x, f.x, rtol=1e-9, atol=1e-15)
     assert np.allclose(kf.P, f.P, rtol=1e-8, atol=1e-12 * np.abs(f.P).max())
-    assert np.allclose(kf.P, kf.P.T) and np.all(np.linalg.eigvalsh(kf.P) > -1e-20)
+    d = 1.0 / np.sqrt(np.diag(kf.P))      # PSD in correlation form: the states' units differ
+    assert np.allclose(kf.P, kf.P.T) and np.all(np.linalg.eigvalsh(d[:, None] * kf.P * d) > -1e-9)
 
 
 def m_is_2(kf):
@@ -111,10 +112,12 @@ def test_chamber_filter_matches_filterpy_joseph_form(params, measurements):
     from filterpy.kalman import KalmanFilter
     p = dict(params)
     p['estimator.measurements'] = measurements
-    for k in ('leakage', 'displacement', 'compliance'):      # the plain KF (adaptive EKF:
-        p[f'estimator.model.adapt_{k}'] = False               # test_estimator_robust.py)
+    for k in ('leakage', 'displacement', 'compliance', 'friction'):   # the plain KF (adaptive
+        p[f'estimator.model.adapt_{k}'] = False               # EKF: test_estimator_robust.py)
+    p['estimator.model.offset_bound'] = 0.0                   # and no projection
     kf = Estimator(p).kf
     assert isinstance(kf, ChamberKF)
+    kf.set_moved_gate(-1, 0.0)                               # and no gated offset
     f = KalmanFilter(dim_x=kf.n, dim_z=kf.H.shape[0], dim_u=3)
     f.Q, f.H, f.R = kf.Q, kf.H, kf.R
     f.P, f.x = kf.P.copy(), kf.x.copy()

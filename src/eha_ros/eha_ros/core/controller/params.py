@@ -17,7 +17,7 @@ NODE = Schema('controller', TF + [
           doc='references are clamped to +-(stroke/2 - margin)'),
     Param('control.rate_limit', 'float', 'm/s', 0.19, 1e-3, 10.0,
           doc='reference rate limit (Table 3.1: 190 mm/s)'),
-    Param('control.accel_limit', 'float', 'm/s^2', 10.0, 0.0, 1000.0,
+    Param('control.accel_limit', 'float', 'm/s^2', 6.0, 0.0, 1000.0,
           doc='acceleration of the move to a jumped reference (0: rate limit only)'),
     Param('control.antiwindup', 'bool', '', True, doc='conditional integration at the clamp'),
     Param('control.prewarp_hz', 'float', 'Hz', 0.0, 0.0, 200.0,

@@ -89,16 +89,21 @@ def continuous(c: Circuit, s_a: bool, s_b: bool, gm_corner_hz: float | None = No
     return A, B
 
 
-def leak_sensitivity(c: Circuit, A: np.ndarray, Ts: float, n: int) -> np.ndarray:
+def leak_sensitivity(c: Circuit, A: np.ndarray, Ts: float, n: int,
+                     paths: str = 'xr') -> np.ndarray:
     """d expm((A + s A_L) Ts)/ds at s = 0 (n x n, zero outside the linear block): A_L the
-    leakage part of the chamber rows (C_x, C_r), so lambda D is the first-order change of the
-    ZOH F when every leakage is (1 + lambda) times nominal (block-triangular expm, Van Loan)."""
+    leakage part of the chamber rows, of the cross-port path C_x ('x' in ``paths``) and of the
+    per-port path C_r to the accumulator ('r'), so lambda D is the first-order change of the
+    ZOH F when those leakages are (1 + lambda) times nominal (block-triangular expm, Van
+    Loan)."""
     m = A.shape[0]
     k = c.beta / c.V_d
+    cx = c.C_x if 'x' in paths else 0.0
+    cr = c.C_r if 'r' in paths else 0.0
     AL = np.zeros((m, m))
     for i in (2, 3):
-        AL[i, i] = -k * (c.C_x + c.C_r)
-        AL[i, 5 - i] = k * c.C_x
+        AL[i, i] = -k * (cx + cr)
+        AL[i, 5 - i] = k * cx
     M = np.zeros((2 * m, 2 * m))
     M[:m, :m] = M[m:, m:] = A * Ts
     M[:m, m:] = AL * Ts
@@ -123,14 +128,19 @@ class ChamberKF(MeasuredKF):
                  leakage: tuple | None = None, displacement: tuple | None = None,
                  compliance: tuple | None = None, offset_bound: float = 0.0,
                  adapt_gate: float = 0.0, compliance_alpha: float = 1.0,
-                 leakage_excitation: float = 0.0):
+                 leakage_excitation: float = 0.0, friction: tuple | None = None,
+                 friction_scale: tuple | None = None, external: tuple | None = None):
         """``leakage``/``displacement``/``compliance``: (q per step, p0, lo, hi) of the relative
         corrections lambda/delta/kappa (:mod:`.adapt`), None: not a state; ``offset_bound``
         [m]: projection bound of the sensor offset b (0: none); ``adapt_gate``: no update of
         lambda, delta, kappa from a sample whose normalised position innovation exceeds it (0:
         always); ``compliance_alpha``: per-tick low-pass weight of kappa's pressure
         increments; ``leakage_excitation`` [Pa]: lambda is not updated while |p_A - p_B| is
-        below it (adapt.leakage_unexcited)."""
+        below it (adapt.leakage_unexcited); ``friction``: (F_c, F_s, v_s, alpha, v_rest, n_rest, q_rest) of the
+        Stribeck friction input (adapt.friction_input; None: eq. 4.36 with F_s, v_eps);
+        ``friction_scale``: (q, p0, lo, hi) of the friction scale phi, None: not a state;
+        ``external``: (q, p0, lo, hi) of the external-leakage correction epsilon (C_r x
+        (1 + epsilon); lambda then scales C_x only), None: lambda scales both paths."""
         self.c, self.Ts, self.F_s, self.v_eps = c, Ts, F_s, v_eps
         self.friction_uses_pressure = False
         corner = None if gm is None else gm[1]
@@ -149,10 +159,16 @@ class ChamberKF(MeasuredKF):
             self.i_load = len(q)
             q.append(q_load)
             p0.append(p0_load)
-        self.i_lam = self.i_del = self.i_kap = -1
-        self.lam_range = self.del_range = self.kap_range = (0.0, 0.0)
+        self.i_lam = self.i_del = self.i_kap = self.i_phi = self.i_eps = -1
+        self.lam_range = self.del_range = self.kap_range = self.phi_range = (0.0, 0.0)
+        self.eps_range = (0.0, 0.0)
         self.c_Ts = c.V_d / (c.beta * Ts)
-        for name, spec in (('lam', leakage), ('del', displacement), ('kap', compliance)):
+        if friction is None:
+            friction_scale = None                  # phi scales the Stribeck curve only
+        if leakage is None:
+            external = None                        # epsilon splits lambda's paths
+        for name, spec in (('lam', leakage), ('del', displacement), ('kap', compliance),
+                           ('phi', friction_scale), ('eps', external)):
             if spec is not None:
                 setattr(self, 'i_' + name, len(q))
                 setattr(self, name + '_range', (float(spec[2]), float(spec[3])))
@@ -163,7 +179,8 @@ class ChamberKF(MeasuredKF):
         self.i_gm = 4 if gm is not None else -1
         self.offset_bound = float(offset_bound)
         self.edge = 0                               # adaptive states on a bound (last update)
-        params = [i for i in (self.i_lam, self.i_del, self.i_kap) if i >= 0]
+        params = [i for i in (self.i_lam, self.i_del, self.i_kap, self.i_phi, self.i_eps)
+                  if i >= 0]
         self.i_frozen = min(params) if params else n     # the adaptive states are the last
         self.adapt_gate = float(adapt_gate)
         self.alpha_dp = float(compliance_alpha)     # low-pass of the compliance flow's input
@@ -171,7 +188,8 @@ class ChamberKF(MeasuredKF):
         # (F, G) per check-valve state, index 2 s_a + s_b
         self.modes = []
         L = []                                      # ZOH columns of a unit flow into A, B
-        D = []                                      # leakage sensitivity of the ZOH F
+        D = []                                      # leakage sensitivity of the ZOH F: lambda's
+        De = []                                     # and epsilon's paths
         for s_a in (False, True):
             for s_b in (False, True):
                 A, B = continuous(c, s_a, s_b, corner)
@@ -188,9 +206,11 @@ class ChamberKF(MeasuredKF):
                 Lq = np.zeros((n, 2))
                 Lq[:n_lin] = zoh(A, Bq, Ts)[1]
                 L.append(Lq)
-                D.append(leak_sensitivity(c, A, Ts, n))
+                split = self.i_eps >= 0
+                D.append(leak_sensitivity(c, A, Ts, n, 'x' if split else 'xr'))
+                De.append(leak_sensitivity(c, A, Ts, n, 'r') if split else np.zeros((n, n)))
         self.Lm = np.vstack(L)                      # (4 n, 2), rows of mode m at m n
-        self.Dm = np.vstack(D)                      # (4 n, n)
+        self.Dm = np.hstack((np.vstack(D), np.vstack(De)))   # (4 n, 2 n): lambda | epsilon
         self._Fj = np.zeros((n, n))
         self.F, self.G = self.modes[0]
         self.mode = 0
@@ -199,6 +219,17 @@ class ChamberKF(MeasuredKF):
         self._measurements(n, None if gm is None else 4, R_pos, (2, 3), R_p)
         self.u = np.zeros(3)
         self.u[2] = 1.0
+        self.fk = None                              # adapt.friction_input constants
+        if friction is not None:
+            fk = np.zeros(adapt.NFK)
+            fk[adapt.FK_AP], fk[adapt.FK_DP] = c.A_p, c.D_p
+            fk[adapt.FK_CX], fk[adapt.FK_CR], fk[adapt.FK_PACC] = c.C_x, c.C_r, c.p_acc
+            (fk[adapt.FK_FC], fk[adapt.FK_FS], fk[adapt.FK_VS], fk[adapt.FK_ALPHA],
+             fk[adapt.FK_VREST], fk[adapt.FK_NREST], fk[adapt.FK_QREST]) = friction
+            fk[adapt.FK_ILAM], fk[adapt.FK_IDEL], fk[adapt.FK_IPHI] = (self.i_lam, self.i_del,
+                                                                       self.i_phi)
+            fk[adapt.FK_IEPS] = self.i_eps
+            self.fk = fk
         self.reset()
 
     def reset(self, position: float = 0.0, p_a: float | None = None,
@@ -211,6 +242,7 @@ class ChamberKF(MeasuredKF):
         self.clipped = np.zeros(1)                  # adapt.project: clipping updates in a row
         self.p_last = np.zeros(4)                   # adapt.pressure_increments
         self.p_last[:2] = self.x[2:4]
+        self.fs = np.zeros(adapt.NFS)               # adapt.friction_input state
 
     def valve_mode(self) -> int:
         """Index into :attr:`modes` of the check-valve state the prior pressures give:
@@ -219,27 +251,35 @@ class ChamberKF(MeasuredKF):
         return 2 * int(self.x[2] < p_c) + int(self.x[3] < p_c)
 
     def predict(self, omega: float, p_D: float | None = None, w_friction: float | None = None):
-        """One Ts with the motor speed and the friction estimate of eq. 4.36 (from the
-        measured p_D, or the filter's own, when friction_uses_pressure; its sign from
-        w_friction, default omega) held over the period; the check-valve states come from the
-        prior chamber pressures."""
+        """One Ts with the motor speed and the piston friction held over the period: the
+        Stribeck curve at the pump-flow velocity (adapt.friction_input), or, without
+        ``friction``, eq. 4.36 (from the measured p_D, or the filter's own, when
+        friction_uses_pressure; its sign from w_friction, default omega); the check-valve
+        states come from the prior chamber pressures."""
         self.u[0] = omega
-        pd = (self.x[2] - self.x[3]) if p_D is None else p_D
-        w = omega if w_friction is None else w_friction
-        self.u[1] = friction_estimate(w, pd if self.friction_uses_pressure else None,
-                                      self.c.A_p, self.c.D_p, self.F_s, self.v_eps)
+        if self.fk is not None:
+            self.u[1] = adapt.friction_input(self.fk, self.fs, self.x, omega)
+        else:
+            pd = (self.x[2] - self.x[3]) if p_D is None else p_D
+            w = omega if w_friction is None else w_friction
+            self.u[1] = friction_estimate(w, pd if self.friction_uses_pressure else None,
+                                          self.c.A_p, self.c.D_p, self.F_s, self.v_eps)
         self.mode = self.valve_mode()
         self.F, self.G = self.modes[self.mode]
+        if self.i_phi >= 0:
+            adapt.friction_column(self.F, self.G, self._n_lin, self.i_phi, self.fs)
         if self.adaptive:
             c, x, pl = self.c, self.x, self.p_last
             adapt.pressure_increments(pl, x[2], x[3], self.alpha_dp)
             adapt.parameter_columns(self.F, self.Lm, self.mode * self.n, 0, self._n_lin,
-                                    self.i_lam, self.i_del, self.i_kap, x[2], x[3], pl[2],
-                                    pl[3], omega, c.C_x, c.C_r, c.p_acc, c.D_p, self.c_Ts)
+                                    self.i_lam, self.i_del, self.i_kap, self.i_eps, x[2], x[3],
+                                    pl[2], pl[3], omega, c.C_x, c.C_r, c.p_acc, c.D_p,
+                                    self.c_Ts)
         if self.i_lam >= 0:
+            eps = self.x[self.i_eps] if self.i_eps >= 0 else 0.0
             adapt.predict_jacobian(self.x, self.P, self.F, self._Fj, self.Dm, self.mode * self.n,
-                                   0, self._n_lin, self.x[self.i_lam], self.G, self.u, self.Q,
-                                   self._tmp)
+                                   0, self.n, self._n_lin, self.x[self.i_lam], eps, self.G,
+                                   self.u, self.Q, self._tmp)
         else:
             kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
 
@@ -254,7 +294,8 @@ class ChamberKF(MeasuredKF):
 
     def project(self) -> int:
         self.edge = adapt.project(self.x, self.i_lam, *self.lam_range, self.i_del,
-                                  *self.del_range, self.i_kap, *self.kap_range, self.i_gm,
+                                  *self.del_range, self.i_kap, *self.kap_range, self.i_phi,
+                                  *self.phi_range, self.i_eps, *self.eps_range, self.i_gm,
                                   self.offset_bound, self.clipped, adapt.EDGE_TICKS)
         return self.edge
 
@@ -263,8 +304,19 @@ class ChamberKF(MeasuredKF):
         return self.i_lam >= 0 or self.i_del >= 0 or self.i_kap >= 0
 
     @property
+    def external_leakage_correction(self) -> float:
+        """Estimated relative correction epsilon of the per-port leakage C_r (0 without)."""
+        return float(self.x[self.i_eps]) if self.i_eps >= 0 else 0.0
+
+    @property
+    def friction_correction(self) -> float:
+        """Estimated relative friction correction phi (plant friction / nominal - 1)."""
+        return float(self.x[self.i_phi]) if self.i_phi >= 0 else 0.0
+
+    @property
     def leakage_correction(self) -> float:
-        """Estimated relative leakage correction lambda (plant leakage / nominal - 1)."""
+        """Estimated relative leakage correction lambda (plant leakage / nominal - 1; of C_x
+        only when epsilon is a state)."""
         return float(self.x[self.i_lam]) if self.i_lam >= 0 else 0.0
 
     @property

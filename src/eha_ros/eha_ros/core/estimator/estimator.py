@@ -77,9 +77,17 @@ def build_filter(p: dict):
         m = e + 'model.'
         # the adaptive flow parameters need the measured pressures (the flow balance): none
         # with position-only measurements, where they are unobservable
-        lam, dlt, kap = (((p[m + 'q_' + k], p[m + 'p0_' + k], *p[m + k + '_range'])
-                          if p[m + 'adapt_' + k] and with_p else None)
-                         for k in ('leakage', 'displacement', 'compliance'))
+        lam, dlt, kap, phi, eps = (((p[m + 'q_' + k], p[m + 'p0_' + k], *p[m + k + '_range'])
+                                    if p[m + 'adapt_' + k] and with_p else None)
+                                   for k in ('leakage', 'displacement', 'compliance', 'friction',
+                                             'external_leakage'))
+        fc = p[m + 'friction_lowpass']
+        fric = None
+        if p[m + 'friction'] == 'stribeck':     # the plant's curve; none without Coulomb part
+            on = pp.friction_model == 'stribeck'
+            fric = (pp.F_c if on else 0.0, pp.F_s if on else 0.0, pp.v_s,
+                    adapt.lowpass_alpha(fc, pp.Ts) if fc > 0 else 1.0, p[m + 'rest_velocity'],
+                    round(p[m + 'rest_time'] / pp.Ts), p[m + 'q_load_rest'])
         kf = ChamberKF(circuit(pp), pp.Ts, q, p[e + 'model.p0'], R_pos,
                        p[e + 'noise.pressure_sigma'] ** 2 if with_p else None, gm,
                        F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
@@ -89,8 +97,11 @@ def build_filter(p: dict):
                        leakage_excitation=p[m + 'leakage_excitation'],
                        compliance_alpha=(adapt.lowpass_alpha(p[m + 'compliance_lowpass'], pp.Ts)
                                          if p[m + 'compliance_lowpass'] > 0 else 1.0),
-                       offset_bound=p[m + 'offset_bound'] if gm else 0.0)
+                       offset_bound=p[m + 'offset_bound'] if gm else 0.0,
+                       friction=fric, friction_scale=phi, external=eps)
         kf.friction_uses_pressure = p[e + 'model.friction_pressure']
+        if gm and with_p:       # a load step moves the piston, the sensor offset stays
+            kf.set_moved_gate(kf.i_gm, p[m + 'load_jump_z'])
         return kf
     h = hydromech(pp, p[e + 'model.pd_leakage'])
     R_pd = 2.0 * p[e + 'noise.pressure_sigma'] ** 2 if with_p else None
@@ -186,9 +197,10 @@ class Estimator:
         Predict-only (stale) steps taken since the previous state are provisional: they are
         undone here and replaced by exactly ``ticks`` predictions."""
         if self._saved is not None:
-            self.kf.x[:], self.kf.P[:], self.omega_prev, self.w_fric, p_last = self._saved
+            self.kf.x[:], self.kf.P[:], self.omega_prev, self.w_fric, p_last, fs = self._saved
             if p_last is not None:
                 self.kf.p_last[:] = p_last
+                self.kf.fs[:] = fs
             self._saved = None
         position = float(position)
         pressure_a, pressure_b = float(pressure_a), float(pressure_b)
@@ -240,8 +252,8 @@ class Estimator:
         pz = fd.pressure_z(self.kf.y, self.kf.S, m) if m > 1 else 0.0
         self.detector.update(position, y, S, pz)
         if self.chambers:
-            adapt.maneuver(self.kf.Q, self.i_load, pz, self.load_jump_z, self.q_load,
-                           self.q_load_jump)
+            adapt.maneuver(self.kf.Q, self.i_load, pz, self.load_jump_z,
+                           self.q_load + self.kf.fs[adapt.FS_Q], self.q_load_jump)
         self._monitor(position)
         if self.chinniah is not None and pr_ok:
             self._chinniah_step(position)
@@ -276,7 +288,8 @@ class Estimator:
             if self._saved is None:
                 p_last = getattr(self.kf, 'p_last', None)
                 self._saved = (self.kf.x.copy(), self.kf.P.copy(), self.omega_prev,
-                               self.w_fric, None if p_last is None else p_last.copy())
+                               self.w_fric, None if p_last is None else p_last.copy(),
+                               None if p_last is None else self.kf.fs.copy())
             self._predict(self.omega_prev)
         self.detector.tick_without_sample()
         return self._result(0.0, 0.0, True, 'stale', 0)

@@ -125,6 +125,7 @@ class MeasuredKF(kernels.StateView):
         """H, R: the position (+ the sensor offset state i_gm), then one row per pressure
         state when R_p is given; H1, R1 position only; update buffers."""
         self.with_pressure = R_p is not None
+        self.i_moved, self.moved_gate = -1, 0.0     # kernels.update_gated: set_moved_gate
         rows = list(pressure_states) if self.with_pressure else []
         m = 1 + len(rows)
         self.H = np.zeros((m, n))
@@ -151,15 +152,20 @@ class MeasuredKF(kernels.StateView):
         if self.with_pressure and p_a is not None:
             z = np.array((z_pos,) + self.pressure_z(p_a, p_b))
             nis = kernels.update_gated(self.x, self.P, self.H, self.R, z, self.y, self.S,
-                                       self._ws, f0, gate, iu)
+                                       self._ws, f0, gate, iu, self.i_moved, self.moved_gate)
             return float(self.y[0]), float(self.S[0, 0]), float(nis), len(z)
         nis = kernels.update_gated(self.x, self.P, self.H1, self.R1, np.array((z_pos,)),
-                                   self._y1, self._S1, self._ws, f0, gate, iu)
+                                   self._y1, self._S1, self._ws, f0, gate, iu, -1, 0.0)
         return float(self._y1[0]), float(self._S1[0, 0]), float(nis), 1
 
     def unexcited(self) -> int:
         """Index of a parameter state not to update this sample (-1: none)."""
         return -1
+
+    def set_moved_gate(self, i_state: int, gate: float) -> None:
+        """State ``i_state`` (the sensor offset) is not updated from a sample whose pressure
+        innovation exceeds ``gate`` (normalised; 0: off): see kernels.update_gated."""
+        self.i_moved, self.moved_gate = int(i_state), float(gate)
 
     def update_pressures(self, p_a: float, p_b: float) -> float:
         """Update with the pressures alone (the position sensor isolated: its sample is not
@@ -171,7 +177,7 @@ class MeasuredKF(kernels.StateView):
         y, S = np.zeros(m), np.zeros((m, m))
         return float(kernels.update_gated(self.x, self.P, self.Hp, self.Rp, z, y, S, self._ws,
                                           getattr(self, 'i_frozen', self.n), 0.0,
-                                          self.unexcited()))
+                                          self.unexcited(), -1, 0.0))
 
     def innovation_only(self, z_pos: float):
         """Position innovation and its variance without updating (for a rejected sample)."""

@@ -23,6 +23,19 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.pd_leakage', 'str', '', 'eq3_22', choices=('boost', 'eq3_22', 'eq4_35'),
           doc='eq4_35 structure only: p_D leakage: boost = 2 (C_p+C_c+C_r) beta/V_d, '
               'eq3_22 = 2 C_eq beta/V_d, eq4_35 = C_eq beta/V_d'),
+    Param(E + 'model.friction', 'str', '', 'stribeck', choices=('stribeck', 'eq4_36'),
+          doc='chambers: piston friction of the model: stribeck = the plant curve of eq. 3.33 '
+              '(plant.friction F_c, F_s, v_s; Table 3.7) at the pump-flow velocity, low-passed '
+              'at friction_lowpass (adapt.friction_input); eq4_36 = -sign(xdot) min(|p_D A_p|, '
+              'F_s) with F_s, v_eps below (eq4_35 structure: always)'),
+    Param(E + 'model.rest_velocity', 'float', 'm/s', 3e-3, 0.0, 1.0,
+          doc='stribeck: the piston is at rest while the pump-flow velocity stays below this '
+              'for rest_time (stiction: the friction is whatever holds it)'),
+    Param(E + 'model.rest_time', 'float', 's', 0.1, 0.0, 100.0),
+    Param(E + 'model.q_load_rest', 'float', 'N^2', 1000.0, 0.0, 1e12,
+          doc='stribeck: per-step variance added to the force state\'s random walk while the '
+              'piston is at rest (stiction: the holding force is whatever holds it; the friction '
+              'input is held)'),
     Param(E + 'model.F_s', 'float', 'N', 800.0, 0.0, 1.0e5,
           doc='friction bound of eq. 4.36'),
     Param(E + 'model.v_eps', 'float', 'm/s', 1.0e-2, 1.0e-6, 0.1,
@@ -50,8 +63,9 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.p0_leak', 'float', '(1e-12 m^3/(s Pa))^2', 4.0, 0.0, 1e6),
     Param(E + 'model.load_state', 'bool', '', True,
           doc='add an external-force state (random walk) so a static load does not bias x'),
-    Param(E + 'model.q_load', 'float', 'N^2', 100.0, 0.0, 1e12,
-          doc='per-step random-walk variance of the external force'),
+    Param(E + 'model.q_load', 'float', 'N^2', 1e-4, 0.0, 1e12,
+          doc='per-step random-walk variance of the external force (stribeck friction: the '
+              'load; eq4_36: the load and every friction error)'),
     Param(E + 'model.q_load_jump', 'float', 'N^2', 1e8, 0.0, 1e14,
           doc='per-step variance of the external force after a sample whose pressure '
               'innovation exceeds load_jump_z (a load step; adjustable-level process noise)'),
@@ -63,14 +77,24 @@ ESTIMATOR = Schema('estimator', [
     # Defaults = config/estimator.yaml = scripts/tune_estimator's values (Table 4.5 + box,
     # sensor model).
     Param(E + 'model.adapt_leakage', 'bool', '', True,
-          doc='chambers: relative leakage correction lambda as a state (every C x (1+lambda))'),
+          doc='chambers: relative leakage correction lambda as a state (C_p + C_c x (1+lambda); '
+              'every leakage without adapt_external_leakage)'),
     Param(E + 'model.q_leakage', 'float', '', 6.2362e-09, 0.0, 1e6,
           doc='per-step random-walk variance of lambda'),
     Param(E + 'model.p0_leakage', 'float', '', 6.236, 0.0, 1e6, doc='initial variance of lambda'),
-    Param(E + 'model.leakage_range', 'float[]', '', [-0.99, 17.74], -1.0, 1e3, min_len=2,
+    Param(E + 'model.leakage_range', 'float[]', '', [-0.99, 30.41], -1.0, 1e3, min_len=2,
           doc='projection range of lambda [lo, hi]'),
     Param(E + 'model.leakage_excitation', 'float', 'Pa', 0.0, 0.0, 1e8,
           doc='lambda is updated only while |p_A - p_B| exceeds this (dead zone)'),
+    Param(E + 'model.adapt_external_leakage', 'bool', '', True,
+          doc='chambers: relative correction epsilon of the per-port leakage C_r as a state '
+              '(C_r x (1+epsilon)); lambda then scales the cross-port C_p + C_c only'),
+    Param(E + 'model.q_external_leakage', 'float', '', 6.2362e-09, 0.0, 1e6,
+          doc='per-step random-walk variance of epsilon'),
+    Param(E + 'model.p0_external_leakage', 'float', '', 6.236, 0.0, 1e6,
+          doc='initial variance of epsilon'),
+    Param(E + 'model.external_leakage_range', 'float[]', '', [-0.99, 36.5], -1.0, 1e3,
+          min_len=2, doc='projection range of epsilon [lo, hi]'),
     Param(E + 'model.adapt_displacement', 'bool', '', True,
           doc='chambers: relative displacement correction delta as a state (D_p x (1+delta))'),
     Param(E + 'model.q_displacement', 'float', '', 0, 0.0, 1.0,
@@ -87,6 +111,15 @@ ESTIMATOR = Schema('estimator', [
           doc='initial variance of kappa'),
     Param(E + 'model.compliance_range', 'float[]', '', [-0.5833, 0.9167], -0.9, 10.0, min_len=2,
           doc='projection range of kappa [lo, hi]'),
+    Param(E + 'model.adapt_friction', 'bool', '', True,
+          doc='chambers with stribeck friction: relative friction correction phi as a state '
+              '(F_c, F_s x (1+phi))'),
+    Param(E + 'model.q_friction', 'float', '', 0.0, 0.0, 1.0,
+          doc='per-step random-walk variance of phi'),
+    Param(E + 'model.p0_friction', 'float', '', 0.1818, 0.0, 10.0,
+          doc='initial variance of phi'),
+    Param(E + 'model.friction_range', 'float[]', '', [-0.875, 1.375], -0.99, 10.0, min_len=2,
+          doc='projection range of phi [lo, hi]'),
     Param(E + 'model.adapt_gate', 'float', '', 4.0, 0.0, 1e6,
           doc='no update of the adaptive states from a sample whose |position innovation| / '
               'sqrt(S) exceeds this (0: always): a fast transient the model cannot explain '

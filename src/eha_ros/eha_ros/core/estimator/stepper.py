@@ -35,7 +35,11 @@ K_IFROZEN, K_GATE = 43, 44
 K_ILOAD, K_QLOAD, K_QLOADJ, K_LOADZ, K_ALPHA_DP = 45, 46, 47, 48, 49
 K_QX, K_QXD, K_BDIS, K_PEXC = 50, 51, 52, 53
 K_MON = 54             # adapt.NMK entries: the consistency monitor's constants
-NK = K_MON + adapt.NMK
+K_STRIBECK, K_IPHI, K_PHILO, K_PHIHI, K_IEPS, K_EPSLO, K_EPSHI = 58, 59, 60, 61, 62, 63, 64
+K_IMOVED, K_MOVEDZ = 65, 66
+K_FK = 67              # adapt.NFK entries: the friction model's constants
+NK = K_FK + adapt.NFK
+assert K_MON + adapt.NMK == K_STRIBECK
 # state
 E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
 E_NJUMP, E_NSAME, E_NDRIFT, E_GPOS, E_GNEG, E_ZPREV, E_HAS_ZPREV = 4, 5, 6, 7, 8, 9, 10
@@ -49,7 +53,8 @@ E_PLAST = 21           # 4 entries: chamber filter's adapt.pressure_increments s
 E_YPREV, E_STEPPED = 25, 26   # fault detector: last innovation, run began with a step
 E_CLIPPED = 27         # chamber filter: updates in a row that clipped a parameter
 E_MON = 28             # adapt.NMS entries: the consistency monitor's state
-NE = E_MON + adapt.NMS
+E_FS = E_MON + adapt.NMS   # adapt.NFS entries: the friction model's state
+NE = E_FS + adapt.NFS
 CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
 
 
@@ -76,7 +81,7 @@ def pack(est):
         c = kf.c if est.chambers else kf.h
         k[K_AP], k[K_DP], k[K_FS], k[K_VEPS] = c.A_p, c.D_p, kf.F_s, kf.v_eps
     k[K_CHAMBERS] = est.chambers
-    k[K_ILAM] = k[K_IDEL] = k[K_IKAP] = k[K_IGM] = -1.0
+    k[K_ILAM] = k[K_IDEL] = k[K_IKAP] = k[K_IGM] = k[K_IPHI] = k[K_IEPS] = -1.0
     if est.chambers:
         k[K_PC] = kf.c.p_c
         k[K_CX], k[K_CR], k[K_PACC] = kf.c.C_x, kf.c.C_r, kf.c.p_acc
@@ -89,6 +94,12 @@ def pack(est):
         e[E_PLAST:E_PLAST + 4] = kf.p_last
         e[E_CLIPPED] = kf.clipped[0]
         k[K_ALPHA_DP] = kf.alpha_dp
+        k[K_IPHI], (k[K_PHILO], k[K_PHIHI]) = kf.i_phi, kf.phi_range
+        k[K_IEPS], (k[K_EPSLO], k[K_EPSHI]) = kf.i_eps, kf.eps_range
+        if kf.fk is not None:
+            k[K_STRIBECK] = 1.0
+            k[K_FK:K_FK + adapt.NFK] = kf.fk
+            e[E_FS:E_FS + adapt.NFS] = kf.fs
     k[K_ILOAD], k[K_QLOAD], k[K_QLOADJ], k[K_LOADZ] = (est.i_load, est.q_load,
                                                       est.q_load_jump, est.load_jump_z)
     k[K_QX], k[K_QXD], k[K_BDIS] = est.q_x, est.q_x_disagree, est.b_dis
@@ -116,9 +127,11 @@ def pack(est):
         e[E_MODE] = kf.mode
         F, G = F.copy(), G.copy()           # overwritten per tick with the mode's pair
         # Gm: the stacked G (3 columns) then the unit-flow columns of adapt.parameter_columns
-        # Fm: the stacked F, then the leakage sensitivity D (adapt.predict_jacobian)
+        # Fm: the stacked F, then the leakage sensitivities of lambda and epsilon
+        # (adapt.predict_jacobian)
         Fm = np.hstack((np.vstack([f for f, _ in kf.modes]), kf.Dm))
         Gm = np.hstack((np.vstack([g for _, g in kf.modes]), kf.Lm))
+    k[K_IMOVED], k[K_MOVEDZ] = (kf.i_moved, kf.moved_gate) if est.is_model else (-1.0, 0.0)
     if est.is_model:
         u = kf.u
         g_leak = kf._g_leak if kf.i_leak is not None else np.zeros(1)
@@ -150,6 +163,7 @@ def unpack(est, e) -> None:
         kf.edge = int(e[E_EDGE])
         kf.p_last[:] = e[E_PLAST:E_PLAST + 4]
         kf.clipped[0] = e[E_CLIPPED]
+        kf.fs[:] = e[E_FS:E_FS + adapt.NFS]
         kf.mode = int(e[E_MODE])
         kf.F, kf.G = kf.modes[kf.mode]
 
@@ -254,9 +268,13 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
         e[E_WFRIC] += k[K_ALPHA_WF] * (omega - e[E_WFRIC])
     if k[K_CHAMBERS] > 0.5:
         u[0] = omega
-        pd = e[E_PD_FILT] if use_p else x[2] - x[3]
-        u[1] = friction_estimate(e[E_WFRIC], pd, k[K_FRIC_P] > 0.5, k[K_AP], k[K_DP], k[K_FS],
-                                 k[K_VEPS])
+        if k[K_STRIBECK] > 0.5:
+            u[1] = adapt.friction_input(k[K_FK:K_FK + adapt.NFK], e[E_FS:E_FS + adapt.NFS], x,
+                                        omega)
+        else:
+            pd = e[E_PD_FILT] if use_p else x[2] - x[3]
+            u[1] = friction_estimate(e[E_WFRIC], pd, k[K_FRIC_P] > 0.5, k[K_AP], k[K_DP],
+                                     k[K_FS], k[K_VEPS])
         mode = 2 * (x[2] < k[K_PC]) + (x[3] < k[K_PC])
         e[E_MODE] = mode
         n = x.shape[0]
@@ -265,13 +283,14 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
                 F[i, j] = Fm[mode * n + i, j]
             for j in range(G.shape[1]):
                 G[i, j] = Gm[mode * n + i, j]
+        adapt.friction_column(F, G, int(k[K_NLIN]), int(k[K_IPHI]), e[E_FS:E_FS + adapt.NFS])
         if k[K_ILAM] >= 0 or k[K_IDEL] >= 0 or k[K_IKAP] >= 0:
             pl = e[E_PLAST:E_PLAST + 4]
             adapt.pressure_increments(pl, x[2], x[3], k[K_ALPHA_DP])
             adapt.parameter_columns(F, Gm, mode * n, G.shape[1], int(k[K_NLIN]),
-                                    int(k[K_ILAM]), int(k[K_IDEL]), int(k[K_IKAP]), x[2], x[3],
-                                    pl[2], pl[3], omega, k[K_CX], k[K_CR], k[K_PACC], k[K_DP],
-                                    k[K_CTS])
+                                    int(k[K_ILAM]), int(k[K_IDEL]), int(k[K_IKAP]),
+                                    int(k[K_IEPS]), x[2], x[3], pl[2], pl[3], omega, k[K_CX],
+                                    k[K_CR], k[K_PACC], k[K_DP], k[K_CTS])
     elif k[K_MODEL] > 0.5:
         u[0] = omega
         has_pd = use_p and k[K_FRIC_P] > 0.5
@@ -285,8 +304,10 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
     il = int(k[K_ILAM])
     if k[K_CHAMBERS] > 0.5 and il >= 0:
         n = x.shape[0]
+        ie = int(k[K_IEPS])
         adapt.predict_jacobian(x, P, F, ws[:n * n].reshape((n, n)), Fm, int(e[E_MODE]) * n, n,
-                               int(k[K_NLIN]), x[il], G, u, Q, tmp)
+                               2 * n, int(k[K_NLIN]), x[il], x[ie] if ie >= 0 else 0.0, G, u,
+                               Q, tmp)
     else:
         predict(x, P, F, G, u, Q, tmp)
     if pr_ok:
@@ -301,23 +322,28 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
             zm[2] = pb
         else:
             zm[1] = e[E_PD_MEAS]
-        nis = update_gated(x, P, H, R, zm, y, S, ws, int(k[K_IFROZEN]), k[K_GATE], iu)
+        nis = update_gated(x, P, H, R, zm, y, S, ws, int(k[K_IFROZEN]), k[K_GATE], iu,
+                           int(k[K_IMOVED]), k[K_MOVEDZ])
         innov, s00, m = y[0], S[0, 0], zm.shape[0]
         pz = fd.pressure_z(y, S, m)
     else:
         z1[0] = position
-        nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k[K_IFROZEN]), k[K_GATE], iu)
+        nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k[K_IFROZEN]), k[K_GATE], iu,
+                           -1, 0.0)
         innov, s00, m = y1[0], S1[0, 0], 1
         pz = 0.0
     if k[K_CHAMBERS] > 0.5:
         e[E_EDGE] = adapt.project(x, int(k[K_ILAM]), k[K_LAMLO], k[K_LAMHI], int(k[K_IDEL]),
                                   k[K_DELLO], k[K_DELHI], int(k[K_IKAP]), k[K_KAPLO],
-                                  k[K_KAPHI], int(k[K_IGM]), k[K_BMAX],
+                                  k[K_KAPHI], int(k[K_IPHI]), k[K_PHILO], k[K_PHIHI],
+                                  int(k[K_IEPS]), k[K_EPSLO], k[K_EPSHI], int(k[K_IGM]),
+                                  k[K_BMAX],
                                   e[E_CLIPPED:E_CLIPPED + 1], adapt.EDGE_TICKS)
     e[E_UPDATES] += 1
     detect(k, e, position, innov, s00, pz)
     if k[K_CHAMBERS] > 0.5:
-        adapt.maneuver(Q, int(k[K_ILOAD]), pz, k[K_LOADZ], k[K_QLOAD], k[K_QLOADJ])
+        adapt.maneuver(Q, int(k[K_ILOAD]), pz, k[K_LOADZ],
+                       k[K_QLOAD] + e[E_FS + adapt.FS_Q], k[K_QLOADJ])
     adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
                   int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT, int(e[E_EDGE]))
     if k[K_CHAMBERS] > 0.5:

@@ -20,6 +20,13 @@ position-sensor model (config/plant.yaml plant.sensors.*, = the filter's R).
   T_memory = 1e4 s (oil warm-up scale), rho = 0.1. Measured (nominal 1 Hz sine, seeds 1-4,
   goal 0.25): worst RMSE ratio 0.249 with 1e4 s, 0.255 with 1e3 s, 0.27 with 1e2 s; the
   leakiest plants (C_eq x10) would want a shorter memory (0.57 at 1e2 s, 0.62 at 1e3 s).
+- Leakage paths (issue 15): lambda scales the cross-port C_x = C_p + C_c, epsilon the per-port
+  C_r; the box's leak_split s moves leakage between them with C_eq = C_x + C_r/2 kept (eq.
+  3.22): C_r x C_eq s, C_x x C_eq (C_eq0 - s C_r0/2)/C_x0. Table 4.5 varies C_eq only (s = 1):
+  both variances are C_eq's, the ranges cover the box's products.
+- Friction phi (F_c, F_s x (1 + phi)): Table 4.5 keeps the friction of Table 3.7, so its
+  variance is the box's (log-uniform friction multiplier), not zero: the friction is as
+  uncertain as the random family says.
 - Sensor error band: the position sensor's Gauss-Markov offset b has sigma_gm (Fig. 4.6);
   at the box's largest noise scale, over ``T_op`` s of operation on every plant of the grid, the
   Gauss-Markov process gives about T_op 2 pi f_c independent samples per plant; the band
@@ -43,17 +50,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
+from ..sim.family import load_box
 from .adapt import lowpass_alpha
-
-BOX = {'C_eq': (0.05, 15.0), 'D_p': (0.75, 1.05), 'beta': (0.6, 1.5), 'noise': (1.0, 2.0)}
-
 
 @dataclass
 class Inputs:
     """Family ranges (multipliers), sensor model (SI), choices."""
 
     family: dict                       # name -> (lo, hi) multipliers of Table 4.5
-    box: dict = field(default_factory=lambda: dict(BOX))
+    box: dict = field(default_factory=load_box)   # config/campaigns/family_random.yaml
     Ts: float = 1e-3
     position_sigma: float = 1e-5       # white noise sigma [m]
     gm_sigma: float = 2e-5             # Gauss-Markov sigma [m]
@@ -65,11 +70,14 @@ class Inputs:
     rho: float = 0.1                   # fraction of the family spread ...
     T_memory: float = 1.0e4            # ... the adaptive states may move within this [s]
     drifting: tuple = ('leakage', 'compliance')   # viscosity, air and temperature move C and
-                                                  # beta; the displacement is geometry: q = 0
+                                                  # beta (both leakage paths); the displacement
+                                                  # is geometry, the friction Table 3.7: q = 0
     monitor_lowpass: float = 5.0       # [Hz]
     jump_k: float = 5.0
     A_p: float = 2.572e-3              # [m^2] piston area
     C_leak: float = 5.6e-12            # [m^3/(s Pa)] C_p + C_c + C_r of the nominal plant
+    C_x: float = 2.0e-12               # [m^3/(s Pa)] C_p + C_c (cross-port) of the nominal plant
+    C_r: float = 3.6e-12               # [m^3/(s Pa)] C_r (per port) of the nominal plant
     v_excite: float = 0.0              # [m/s] piston speed a unit lambda error must make (0: off)
 
 
@@ -82,7 +90,8 @@ def log_uniform_moments(lo: float, hi: float, f=lambda m: m):
 
 def correction(name: str, lo: float, hi: float):
     """(f, correction range) of the adaptive state for multiplier range [lo, hi]."""
-    f = {'C_eq': lambda m: m - 1.0, 'D_p': lambda m: m - 1.0,
+    f = {'C_eq': lambda m: m - 1.0, 'C_x': lambda m: m - 1.0, 'C_r': lambda m: m - 1.0,
+         'D_p': lambda m: m - 1.0, 'friction': lambda m: m - 1.0,
          'beta': lambda m: 1.0 / m - 1.0}[name]
     a, b = f(np.float64(lo)), f(np.float64(hi))
     return f, (min(a, b), max(a, b))
@@ -91,15 +100,25 @@ def correction(name: str, lo: float, hi: float):
 def derive(inp: Inputs) -> dict:
     """The estimator.* values (dotted keys without the 'estimator.' prefix) and a report."""
     out, notes = {}, []
-    for name, key in (('C_eq', 'leakage'), ('D_p', 'displacement'), ('beta', 'compliance')):
-        lo = min(inp.family[name][0], inp.box[name][0])
-        hi = max(inp.family[name][1], inp.box[name][1])
+    c_eq0 = inp.C_x + 0.5 * inp.C_r
+    split = inp.box.get('leak_split', (1.0, 1.0))[:2]
+    k_x = [(c_eq0 - sp * 0.5 * inp.C_r) / inp.C_x for sp in split]     # C_x per C_eq
+    box = dict(inp.box)
+    box['C_x'] = (inp.box['C_eq'][0] * min(k_x), inp.box['C_eq'][1] * max(k_x))
+    box['C_r'] = (inp.box['C_eq'][0] * split[0], inp.box['C_eq'][1] * split[1])
+    fam = dict(inp.family, C_x=inp.family['C_eq'], C_r=inp.family['C_eq'],
+               friction=inp.box['friction'][:2])
+    for name, key in (('C_x', 'leakage'), ('C_r', 'external_leakage'), ('D_p', 'displacement'),
+                      ('beta', 'compliance'), ('friction', 'friction')):
+        lo = min(fam[name][0], box[name][0])
+        hi = max(fam[name][1], box[name][1])
         f, (c_lo, c_hi) = correction(name, lo, hi)
-        _, var = log_uniform_moments(*inp.family[name], f)
+        _, var = log_uniform_moments(*fam[name], f)
         span = c_hi - c_lo
         r_lo = max(c_lo - inp.margin * span, -0.99)
         r_hi = c_hi + inp.margin * span
-        q = (inp.rho ** 2) * var * inp.Ts / inp.T_memory if key in inp.drifting else 0.0
+        drifts = key in inp.drifting or (key == 'external_leakage' and 'leakage' in inp.drifting)
+        q = (inp.rho ** 2) * var * inp.Ts / inp.T_memory if drifts else 0.0
         out[f'model.p0_{key}'] = var
         out[f'model.q_{key}'] = q
         out[f'model.{key}_range'] = [r_lo, r_hi]
