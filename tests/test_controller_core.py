@@ -149,3 +149,30 @@ def test_5mm_step_on_the_nonlinear_plant_overshoot_settling():
     overshoot, settling, steady = res[10.0]
     assert overshoot <= 5.0 and settling <= 0.3 and steady <= 20e-6
     assert res[0.0][0] > 5.0
+
+
+def test_reference_acceleration_within_the_weakest_drive_of_the_family():
+    """control.accel_limit comes from the family: the drive's current limit bounds the piston
+    acceleration at k_T I_max D_p / (J_eq A_p); on the weakest plant of Table 4.5 (k_T and D_p
+    x0.8) that is 7.4 m/s^2. Beyond it the drive saturates below the speed clamp the
+    anti-windup knows and the 5 mm step overshoots (10 m/s^2: 12.3 %)."""
+    import os
+    from eha_ros.core.qft.spec import load_spec
+    from eha_ros.core.sim import campaign, scenarios
+    nom = campaign.nominal_params()
+    spec = load_spec(os.path.join('config', 'qft_spec.yaml'))
+    kT, Dp = spec['family.k_T_range'][0], spec['family.D_p_range'][0]
+    pl = nom['plant_sim']
+    a_max = (kT * pl['plant.motor.k_T'] * pl['plant.drive.I_max'] * Dp * pl['plant.pump.D_p']
+             / (pl['plant.motor.J_eq'] * pl['plant.cylinder.A_p']))
+    acc = nom['controller']['control.accel_limit']
+    weakest = dict(C_eq=1.0, D_p=Dp, beta=1.0, k_T=kT, k_E=spec['family.k_E_range'][1])
+    figs = {}
+    for a in (acc, 10.0):
+        n = dict(nom, controller=dict(nom['controller'], **{'control.accel_limit': a}))
+        figs[a], _ = scenarios.run(scenarios.load('step'), n, weakest, seed=1, trace=False)
+    print(f'\nweakest drive: {a_max:.2f} m/s^2; 5 mm step overshoot with {acc:g} m/s^2 '
+          f'{figs[acc]["overshoot_pct"]:.2f} %, with 10 m/s^2 {figs[10.0]["overshoot_pct"]:.2f} %')
+    assert acc <= 0.85 * a_max
+    assert figs[acc]['overshoot_pct'] <= 5.0 and figs[acc]['settling_s'] <= 0.3
+    assert figs[10.0]['overshoot_pct'] > 5.0
