@@ -155,7 +155,7 @@ def test_reference_acceleration_within_the_weakest_drive_of_the_family():
     """control.accel_limit comes from the family: the drive's current limit bounds the piston
     acceleration at k_T I_max D_p / (J_eq A_p); on the weakest plant of Table 4.5 (k_T and D_p
     x0.8) that is 7.4 m/s^2. Beyond it the drive saturates below the speed clamp the
-    anti-windup knows and the 5 mm step overshoots (10 m/s^2: 12.3 %)."""
+    anti-windup knows and the 5 mm step overshoots (10 m/s^2: 12.6 %)."""
     import os
     from eha_ros.core.qft.spec import load_spec
     from eha_ros.core.sim import campaign, scenarios

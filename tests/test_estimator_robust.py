@@ -232,8 +232,6 @@ def test_yaml_holds_the_tuning_derived_from_the_family(params):
                         gm_sigma=params['plant.sensors.position_gm_sigma'],
                         gm_corner=params['plant.sensors.position_gm_corner'],
                         A_p=params['plant.cylinder.A_p'],
-                        C_leak=params['plant.pump.C_p'] + params['plant.cylinder.C_c']
-                        + params['plant.pump.C_r'],
                         C_x=params['plant.pump.C_p'] + params['plant.cylinder.C_c'],
                         C_r=params['plant.pump.C_r'])
     for key, v in tuning.derive(inp)['values'].items():
@@ -248,6 +246,7 @@ def riccati_ratio(params, c_eq: float, q_force: float) -> float:
     Markov). States x, xdot, p_A, p_B (B on its check valve), the sensor offset b and the
     piston force F_d as a random walk of q_force N^2 per tick; measurements x + b, p_A, p_B;
     the speed noise enters through the pump flow."""
+    import dataclasses
     import math
     from scipy.linalg import expm, solve_discrete_are
     from eha_ros.core.estimator.model_kf import zoh
@@ -255,7 +254,7 @@ def riccati_ratio(params, c_eq: float, q_force: float) -> float:
     from eha_ros.core.plant.parameters import PlantParams
     pp = PlantParams.from_dict(params)
     c = circuit(pp)
-    c = type(c)(**{**c.__dict__, 'C_x': c.C_x * c_eq, 'C_r': c.C_r * c_eq})
+    c = dataclasses.replace(c, C_x=c.C_x * c_eq, C_r=c.C_r * c_eq)
     A, B = continuous(c, False, True, params['plant.sensors.position_gm_corner'])
     n = 6
     Ac = np.zeros((n, n))

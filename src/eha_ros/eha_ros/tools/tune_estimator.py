@@ -75,8 +75,6 @@ def main(argv=None) -> int:
                         n_plants=n, T_op=a.T_op, p_fa=a.p_fa, margin=a.margin, rho=a.rho,
                         T_memory=a.T_memory, monitor_lowpass=a.monitor_lowpass, jump_k=a.jump_k,
                         A_p=pp['plant.cylinder.A_p'],
-                        C_leak=(pp['plant.pump.C_p'] + pp['plant.cylinder.C_c']
-                                + pp['plant.pump.C_r']),
                         C_x=pp['plant.pump.C_p'] + pp['plant.cylinder.C_c'],
                         C_r=pp['plant.pump.C_r'])
     res = tuning.derive(inp)

@@ -340,4 +340,5 @@ def alarm(verdict: int) -> bool:
 
 
 def lowpass_alpha(f_hz: float, Ts: float) -> float:
-    return 1.0 - math.exp(-2.0 * math.pi * f_hz * Ts)
+    """Per-tick weight of a first-order low-pass at f_hz; 1 (no low-pass) for f_hz <= 0."""
+    return 1.0 - math.exp(-2.0 * math.pi * f_hz * Ts) if f_hz > 0 else 1.0

@@ -136,8 +136,9 @@ class ChamberKF(MeasuredKF):
         lambda, delta, kappa from a sample whose normalised position innovation exceeds it (0:
         always); ``compliance_alpha``: per-tick low-pass weight of kappa's pressure
         increments; ``leakage_excitation`` [Pa]: lambda is not updated while |p_A - p_B| is
-        below it (adapt.leakage_unexcited); ``friction``: (F_c, F_s, v_s, alpha, v_rest, n_rest, q_rest) of the
-        Stribeck friction input (adapt.friction_input; None: eq. 4.36 with F_s, v_eps);
+        below it (adapt.leakage_unexcited); ``friction``: (F_c, F_s, v_s, alpha, v_rest,
+        n_rest, q_rest) of the Stribeck friction input and its rest regime
+        (adapt.friction_input; None: eq. 4.36 with F_s, v_eps);
         ``friction_scale``: (q, p0, lo, hi) of the friction scale phi, None: not a state;
         ``external``: (q, p0, lo, hi) of the external-leakage correction epsilon (C_r x
         (1 + epsilon); lambda then scales C_x only), None: lambda scales both paths."""

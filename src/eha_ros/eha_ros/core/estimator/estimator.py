@@ -81,12 +81,11 @@ def build_filter(p: dict):
                                     if p[m + 'adapt_' + k] and with_p else None)
                                    for k in ('leakage', 'displacement', 'compliance', 'friction',
                                              'external_leakage'))
-        fc = p[m + 'friction_lowpass']
         fric = None
         if p[m + 'friction'] == 'stribeck':     # the plant's curve; none without Coulomb part
             on = pp.friction_model == 'stribeck'
             fric = (pp.F_c if on else 0.0, pp.F_s if on else 0.0, pp.v_s,
-                    adapt.lowpass_alpha(fc, pp.Ts) if fc > 0 else 1.0, p[m + 'rest_velocity'],
+                    adapt.lowpass_alpha(p[m + 'friction_lowpass'], pp.Ts), p[m + 'rest_velocity'],
                     round(p[m + 'rest_time'] / pp.Ts), p[m + 'q_load_rest'])
         kf = ChamberKF(circuit(pp), pp.Ts, q, p[e + 'model.p0'], R_pos,
                        p[e + 'noise.pressure_sigma'] ** 2 if with_p else None, gm,
@@ -95,8 +94,7 @@ def build_filter(p: dict):
                        p0_load=p[e + 'model.p0_load'], leakage=lam, displacement=dlt,
                        compliance=kap, adapt_gate=p[m + 'adapt_gate'],
                        leakage_excitation=p[m + 'leakage_excitation'],
-                       compliance_alpha=(adapt.lowpass_alpha(p[m + 'compliance_lowpass'], pp.Ts)
-                                         if p[m + 'compliance_lowpass'] > 0 else 1.0),
+                       compliance_alpha=adapt.lowpass_alpha(p[m + 'compliance_lowpass'], pp.Ts),
                        offset_bound=p[m + 'offset_bound'] if gm else 0.0,
                        friction=fric, friction_scale=phi, external=eps)
         kf.friction_uses_pressure = p[e + 'model.friction_pressure']
@@ -135,8 +133,7 @@ class Estimator:
         self.w_max = params[e + 'validity.max_abs_motor_speed']
         self.isolate = params[e + 'fault.isolate']
         self.alpha_pd = adapt.lowpass_alpha(params[e + 'model.pressure_lowpass'], self.Ts)
-        fc = params[e + 'model.friction_lowpass']
-        self.alpha_wf = adapt.lowpass_alpha(fc, self.Ts) if fc > 0 else 1.0
+        self.alpha_wf = adapt.lowpass_alpha(params[e + 'model.friction_lowpass'], self.Ts)
         self.detector = fd.FaultDetector.from_params(params, self.Ts)
         mk = np.zeros(adapt.NMK)                   # consistency monitor (adapt.monitor)
         mk[adapt.MK_ALPHA] = adapt.lowpass_alpha(params[e + 'monitor.lowpass'], self.Ts)

@@ -35,7 +35,7 @@ position-sensor model (config/plant.yaml plant.sensors.*, = the filter's R).
   measurement, whatever the model says), and the monitor's DISAGREE band is k sigma_d of its
   low-passed disagreement z - x_hat (b plus the low-passed white noise).
 - Leakage excitation (dead zone of lambda, off by default): lambda learns only while a unit
-  lambda error moves the piston by at least v_excite: |p_A - p_B| > v_excite A_p / C_leak.
+  lambda error moves the piston by at least v_excite: |p_A - p_B| > v_excite A_p / (C_x + C_r).
   Measured with v_excite = 2 mm/s (9 bar): the nominal RMSE ratio went to 0.88, because
   lambda's variance then never shrinks during light-load motion and its column keeps the
   position uncertain.
@@ -69,13 +69,12 @@ class Inputs:
     margin: float = 0.25               # projection range widening, fraction of the span
     rho: float = 0.1                   # fraction of the family spread ...
     T_memory: float = 1.0e4            # ... the adaptive states may move within this [s]
-    drifting: tuple = ('leakage', 'compliance')   # viscosity, air and temperature move C and
-                                                  # beta (both leakage paths); the displacement
-                                                  # is geometry, the friction Table 3.7: q = 0
+    # viscosity, air and temperature move both leakage paths and beta; the displacement is
+    # geometry and the friction Table 3.7's: q = 0
+    drifting: tuple = ('leakage', 'external_leakage', 'compliance')
     monitor_lowpass: float = 5.0       # [Hz]
     jump_k: float = 5.0
     A_p: float = 2.572e-3              # [m^2] piston area
-    C_leak: float = 5.6e-12            # [m^3/(s Pa)] C_p + C_c + C_r of the nominal plant
     C_x: float = 2.0e-12               # [m^3/(s Pa)] C_p + C_c (cross-port) of the nominal plant
     C_r: float = 3.6e-12               # [m^3/(s Pa)] C_r (per port) of the nominal plant
     v_excite: float = 0.0              # [m/s] piston speed a unit lambda error must make (0: off)
@@ -117,8 +116,7 @@ def derive(inp: Inputs) -> dict:
         span = c_hi - c_lo
         r_lo = max(c_lo - inp.margin * span, -0.99)
         r_hi = c_hi + inp.margin * span
-        drifts = key in inp.drifting or (key == 'external_leakage' and 'leakage' in inp.drifting)
-        q = (inp.rho ** 2) * var * inp.Ts / inp.T_memory if drifts else 0.0
+        q = (inp.rho ** 2) * var * inp.Ts / inp.T_memory if key in inp.drifting else 0.0
         out[f'model.p0_{key}'] = var
         out[f'model.q_{key}'] = q
         out[f'model.{key}_range'] = [r_lo, r_hi]
@@ -126,7 +124,7 @@ def derive(inp: Inputs) -> dict:
                      f'sigma over Table 4.5 {math.sqrt(var):.4f}; '
                      f'range [{r_lo:+.3f}, {r_hi:+.3f}], '
                      f'q {q:.3g}/step')
-    out['model.leakage_excitation'] = inp.v_excite * inp.A_p / inp.C_leak
+    out['model.leakage_excitation'] = inp.v_excite * inp.A_p / (inp.C_x + inp.C_r)
     notes.append(f'leakage excitation: {out["model.leakage_excitation"] / 1e5:.2f} bar '
                  f'(a unit lambda error = {inp.v_excite * 1e3:g} mm/s)')
     noise = inp.box['noise'][1]
