@@ -42,14 +42,13 @@ def test_tracking_near_unity_at_1hz(grid):
 
 
 def test_stiffness_matches_qft_report(grid):
-    """Min stiffness up to 7 Hz of config/controller.yaml on the leakiest plants: ~33.9 kN/mm,
-    3.3 dB short of the 49 kN/mm of eq. 4.60 (README, Controller design)."""
+    """Min stiffness up to 7 Hz of config/controller.yaml (the stiff QFT design) on the leakiest
+    plants: ~54 kN/mm, above the 49 kN/mm of eq. 4.60 (README, Controller design)."""
     scales, plant, ctl, pred, _ = grid
     k7 = pred['lin_stiffness_kn_per_mm_7hz']
     leaky = scales[:, 0] == scales[:, 0].max()
     assert np.argmin(k7) in np.nonzero(leaky)[0]
-    assert k7.min() == pytest.approx(33.9, rel=0.05)
-    assert 20 * np.log10(49.0 / k7.min()) == pytest.approx(3.3, abs=0.3)
+    assert k7.min() >= 49.0
     # with the QFT design's G_v (nominal 1/k_T on every plant) the figure is the design tool's
     Gv, G, _ = linear.controllers(plant, ctl)
     spec = linear.default_spec()

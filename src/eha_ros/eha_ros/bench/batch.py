@@ -193,11 +193,11 @@ def _estimator(ek, ee, ea, x, w, pa, pb):
 
 @njit(cache=True)
 def _controller(ck, cc, ca, refs, x_hat):
-    Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt = ca
+    Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt = ca
     s = 0.0
     for k in range(refs.shape[0]):
         CS.request(ck, cc, refs[k])
-        s += CS.control(ck, cc, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt, x_hat[k])
+        s += CS.control(ck, cc, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt, x_hat[k])
     return s
 
 

@@ -89,9 +89,9 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
     """
     S, P, U, T, block, meas, aux, ring, table = plant
     ek, ee, x, Pe, F, G, ue, Q, tmp, H, R, y, Sy, H1, R1, y1, S1, g_leak, z2, z1, ws, Fm, Gm = est
-    ck, cc, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt = ctl
+    ck, cc, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt = ctl
     hk, mk, ms, hs, g = mgr
-    keep = (x.copy(), Pe.copy(), ee.copy(), cc.copy(), Fx.copy(), Rx.copy(), ms.copy(),
+    keep = (x.copy(), Pe.copy(), ee.copy(), cc.copy(), Fx.copy(), Gx.copy(), ms.copy(),
             hs.copy(), g.copy(), Q.copy())
     w_meas = np.zeros(2)
     i_meas = np.zeros(2)
@@ -113,7 +113,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
                 or (has_est and not ES.ready(ek, ee, pos, meas[L.M_W0 + ch], pa, pb))):
             return k, EVENT, u
         _copy(x, keep[0]); _copy(Pe, keep[1]); _copy(ee, keep[2]); _copy(cc, keep[3])  # noqa
-        _copy(Fx, keep[4]); _copy(Rx, keep[5]); _copy(ms, keep[6]); _copy(hs, keep[7])  # noqa
+        _copy(Fx, keep[4]); _copy(Gx, keep[5]); _copy(ms, keep[6]); _copy(hs, keep[7])  # noqa
         _copy(g, keep[8]); _copy(Q, keep[9])  # noqa (Q: the estimator's adaptive noise levels)
         for c in range(2):
             w_meas[c] = meas[L.M_W0 + c]
@@ -135,10 +135,10 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
                               reported, fault, innov, nd > 0 and code == 0, steady, age, cmd)
         un = math.nan
         if ok:
-            un = CS.control(ck, cc, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt, x_hat)
+            un = CS.control(ck, cc, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt, x_hat)
         if not math.isfinite(un):
             _copy(keep[0], x); _copy(keep[1], Pe); _copy(keep[2], ee); _copy(keep[3], cc)  # noqa
-            _copy(keep[4], Fx); _copy(keep[5], Rx); _copy(keep[6], ms); _copy(keep[7], hs)  # noqa
+            _copy(keep[4], Fx); _copy(keep[5], Gx); _copy(keep[6], ms); _copy(keep[7], hs)  # noqa
             _copy(keep[8], g); _copy(keep[9], Q)  # noqa
             return k, EVENT, u
         PS.step(S, P, U, T, nsub, block, meas, aux, ring, table, un, load)

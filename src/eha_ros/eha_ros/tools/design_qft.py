@@ -1,9 +1,11 @@
 """design_qft: QFT + PSO design of the EHA cascade controllers (thesis section 4.3).
 
 Velocity loop G_v (eq. 4.65) by PSO on the speed plant omega/i_ref of eq. 3.35, then position
-controller G (eq. 4.74) by PSO on the family of closed velocity loops, then prefilter F (4.77).
-Writes the controller YAML, the thesis' own controllers, and a report (markdown, JSON, PNGs)
-comparing both on every plant of the family."""
+controller G (eq. 4.74) by PSO on the family of closed velocity loops, then prefilter F (4.77),
+then the anti-windup poles of G (qft.antiwindup: circle criterion on the family, saturating
+runs on the nonlinear plant). Writes the controller YAML, the thesis' own controllers, and a
+report (markdown, JSON, PNGs) comparing both on every plant of the family. With --antiwindup
+FILE only the anti-windup poles of an existing controller YAML are designed and written."""
 from __future__ import annotations
 
 import argparse
@@ -18,6 +20,7 @@ from ..core.cli import UsageError, guarded
 from ..core.params import load
 from ..core.plant.parameters import PLANT_SCHEMA
 from ..core.qft import bounds as qb
+from ..core.qft import antiwindup as aw
 from ..core.qft import minimax, cost, family, lti, plots, prefilter, pso, report, verify
 from ..core.qft.spec import load_spec
 
@@ -29,8 +32,11 @@ def parse(argv):
                                  'the controller YAML loaded by the controller node.')
     ap.add_argument('--spec', default='config/qft_spec.yaml', help='QFT specification (ROS params file, node design_qft)')
     ap.add_argument('--plant', default='config/plant.yaml', help='nominal plant parameters')
-    ap.add_argument('--out', default='config/controller_qft.yaml',
-                    help='designed controller YAML (the stack runs config/controller.yaml; copy it there to use it)')
+    ap.add_argument('--out', default='config/controller.yaml',
+                    help='designed controller YAML (default: the one the stack runs)')
+    ap.add_argument('--antiwindup', metavar='FILE', default=None,
+                    help='only design the anti-windup poles of the controller in FILE and write '
+                         'them into it (1-3 min)')
     ap.add_argument('--thesis-out', default=None,
                     help='thesis controllers (eqs. 4.71, 4.76, 4.77) YAML; default: '
                          'controller_thesis.yaml next to --out')
@@ -104,17 +110,58 @@ def update_plant_yaml(path, K, when=''):
         fh.write('\n'.join(lines))
 
 
-def analyse_set(fam, spec, Gv, G, F):
+def analyse_set(fam, spec, Gv, G, F, aw_poles=None):
     bv = qb.velocity_bounds(spec, lambda w: family.torque_responses(fam, w)[0])
     casc = family.velocity_loop_plants(fam, Gv, spec.loop_delay(fam.drive_delay))
     bp = qb.position_bounds(spec, casc.P_omega, casc.P_d)
-    return verify.analyse(fam, spec, Gv, G, F, bv, bp), bv, bp, casc
+    return verify.analyse(fam, spec, Gv, G, F, bv, bp, aw_poles), bv, bp, casc
+
+
+def design_antiwindup(G, F, casc, spec, fam, plant, seed, quick, start=None):
+    """Anti-windup poles of G and their figures (qft.antiwindup.design), logged."""
+    log(f'{PROG}: anti-windup poles of G (circle criterion on {fam.n} plants, saturating runs on '
+        f'the nonlinear plant) ...')
+    t0 = time.time()
+    poles, figs = aw.design(G, F.num_den(), verify.digital_loop(casc, spec, fam),
+                            verify.dense_grid(spec), plant, seed=seed, maxiter=2 if quick else 15,
+                            maxfev=20 if quick else 150, start=start)
+    log(f'{PROG}: anti-windup poles {np.round(poles, 2).tolist()} rad/s ({time.time() - t0:.0f} s): '
+        f'min Re H {figs["aw_circle_min_re"]:.3g}; 40 mm step overshoot '
+        f'{figs["step_40mm_overshoot_pct"]:.2f} %, held 1 s then released '
+        f'{figs["held_release_overshoot_pct"]:.2f} %, 2 mm jump {figs["jump_2mm_overshoot_pct"]:.2f} %')
+    return poles, figs
+
+
+def antiwindup_only(a, spec, plant):
+    """--antiwindup FILE: design the poles for the controller in FILE, rewrite FILE with them."""
+    Gv, G, F = report.read_controller_yaml(a.antiwindup)
+    with open(a.antiwindup, encoding='utf-8') as fh:
+        head = []
+        for ln in fh:
+            if not ln.startswith('#') or ln.startswith('# units:'):
+                break
+            head.append(ln[2:].rstrip('\n'))
+    fam = family.build_family(plant, spec)
+    casc = family.velocity_loop_plants(fam, Gv, spec.loop_delay(fam.drive_delay))
+    poles, figs = design_antiwindup(G, F, casc, spec, fam, plant, a.seed, a.quick,
+                                    start=report.read_antiwindup_poles(a.antiwindup))
+    head = [h for h in head if not h.startswith('anti-windup:')]
+    head.append(f'anti-windup: poles by scripts/design_qft --antiwindup (seed {a.seed}, '
+                f'{dt.datetime.now().isoformat(timespec="seconds")}): min Re H '
+                f'{figs["aw_circle_min_re"]:.3g} on the family; nonlinear nominal plant: 40 mm step '
+                f'{figs["step_40mm_overshoot_pct"]:.2f} %, held 1 s then released '
+                f'{figs["held_release_overshoot_pct"]:.2f} %')
+    report.write_controller_yaml(a.antiwindup, Gv, G, F, '\n'.join(head), aw_poles=poles)
+    log(f'{PROG}: wrote the anti-windup poles into {a.antiwindup}')
+    return 0
 
 
 def main(argv=None):
     a = parse(sys.argv[1:] if argv is None else argv)
     spec = load_spec(a.spec)
     plant = load(PLANT_SCHEMA, [a.plant])
+    if a.antiwindup:
+        return antiwindup_only(a, spec, plant)
     stamp = dt.datetime.now().strftime('%Y%m%d-%H%M%S')
     rdir = a.report_dir or os.path.join('out', 'qft', stamp)
     try:
@@ -226,11 +273,21 @@ def main(argv=None):
         f'digital step worst overshoot {finfo["step_overshoot_worst_pct"]:.3g} %, '
         f'settling {finfo["step_settling_worst_s"]:.3g} s')
 
-    # analysis of both controller sets
-    res_d = verify.analyse(fam, spec, Gv, G, F, bv, bp)
+    # anti-windup of both controller sets
+    aw_d, awf_d = design_antiwindup(G, F, casc, spec, fam, plant, a.seed, a.quick)
     Gv_t = lti.thesis_velocity(fam.k_T_nominal)
+    casc_t = family.velocity_loop_plants(fam, Gv_t, T_d)
+    aw_t, awf_t = design_antiwindup(lti.thesis_position(), lti.thesis_prefilter(), casc_t, spec,
+                                    fam, plant, a.seed, a.quick)
+    summary['antiwindup'] = {'designed': {'poles_real': aw_d.real.tolist(),
+                                          'poles_imag': aw_d.imag.tolist(), **awf_d},
+                             'thesis': {'poles_real': aw_t.real.tolist(),
+                                        'poles_imag': aw_t.imag.tolist(), **awf_t}}
+
+    # analysis of both controller sets
+    res_d = verify.analyse(fam, spec, Gv, G, F, bv, bp, aw_poles=aw_d)
     res_t, bv_t, bp_t, casc_t = analyse_set(fam, spec, Gv_t, lti.thesis_position(),
-                                            lti.thesis_prefilter())
+                                            lti.thesis_prefilter(), aw_poles=aw_t)
     summary['phase_grid_step_deg'] = spec['bounds.phase_step_deg']
     summary['phase_resolution_db'] = {
         'velocity': dict(zip([f'{w:g}' for w in bv.w], qb.phase_resolution_db(bv.merged).tolist())),
@@ -248,15 +305,19 @@ def main(argv=None):
               f'position-loop delay T_d = {1e3 * T_d:.4g} ms (1.5 Ts + plant.drive.delay), Ts = {spec["digital.Ts"]:g} s, '
               f'digital check: ZOH plant, {spec.delay_samples(fam.drive_delay)} delay samples, Tustin G and F\n'
               f'drive gains (plant.drive.Kp_w, Ki_w, lowpass_w) = ({K1:.6g}, {K2:.6g}, {K3:.6g})\n'
-              f'all checks on the {fam.n}-plant family: {"PASS" if res_d["all_pass"] else "FAIL"} (report {rdir})')
-    report.write_controller_yaml(a.out, Gv, G, F, header)
+              f'all checks on the {fam.n}-plant family: {"PASS" if res_d["all_pass"] else "FAIL"} (report {rdir})\n'
+              f'anti-windup: min Re H {awf_d["aw_circle_min_re"]:.3g} on the family; nonlinear nominal plant: '
+              f'40 mm step {awf_d["step_40mm_overshoot_pct"]:.2f} %, held 1 s then released '
+              f'{awf_d["held_release_overshoot_pct"]:.2f} %')
+    report.write_controller_yaml(a.out, Gv, G, F, header, aw_poles=aw_d)
     if a.update_plant_yaml:
         update_plant_yaml(a.plant, (K1, K2, K3), f'(seed {a.seed}, report {rdir})')
         log(f'{PROG}: updated plant.drive.Kp_w, Ki_w, lowpass_w in {a.plant}')
     tout = a.thesis_out or os.path.join(os.path.dirname(os.path.abspath(a.out)), 'controller_thesis.yaml')
     report.write_controller_yaml(tout, Gv_t, lti.thesis_position(), lti.thesis_prefilter(),
                                  'Thesis controllers: G_v eq. 4.71, G eq. 4.76, F eq. 4.77 '
-                                 f'(written by scripts/design_qft, k_T = {fam.k_T_nominal})')
+                                 f'(written by scripts/design_qft, k_T = {fam.k_T_nominal}); '
+                                 'anti-windup poles designed for them', aw_poles=aw_t)
     plots.nichols(os.path.join(rdir, 'nichols_velocity.png'), bv,
                   lambda w: family.torque_responses(fam, w)[0][-1] * Gv.freq(w),
                   'velocity loop: merged bounds and designed L_v0')

@@ -107,8 +107,8 @@ class DiscreteSS:
 
     def steady_state(self, u: float):
         """Put the state at the equilibrium for a constant input u (needs no pole at z = 1)."""
-        self.x = np.ascontiguousarray(np.linalg.solve(np.eye(self.n) - self.Ad, self._bd * u),
-                                      dtype=float)
+        self.x[:] = np.linalg.solve(np.eye(self.n) - self.Ad, self._bd * u)   # in place:
+        # the compiled kernels hold this array
 
     def dc_gain(self) -> float:
         return float(self._cd @ np.linalg.solve(np.eye(self.n) - self.Ad, self._bd)) + self._dd

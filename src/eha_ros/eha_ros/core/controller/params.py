@@ -10,7 +10,11 @@ TF = [Param(f'{name}.{part}', 'float[]', unit, doc=doc)
           ('position_controller', '(rad/s)/m', 'G(s), eq. 4.74, continuous, descending powers'),
           ('prefilter', 'm/m', 'F(s), eq. 4.77'),
           ('velocity_controller', 'A/(rad/s)', 'G_v(s), eq. 4.65 incl. 1/k_T (drive)'))
-      for part in ('num', 'den')]
+      for part in ('num', 'den')] + [
+    Param(f'antiwindup.poles_{part}', 'float[]', 'rad/s',
+          doc=f'{part} parts of the poles of G while the speed clamp is active (observer-form '
+              'anti-windup, core.controller.antiwindup; conjugates listed both; design_qft)')
+    for part in ('real', 'imag')]
 
 NODE = Schema('controller', TF + [
     Param('control.stroke_margin', 'float', 'm', 0.005, 0.0, 0.05,
@@ -19,13 +23,14 @@ NODE = Schema('controller', TF + [
           doc='reference rate limit (Table 3.1: 190 mm/s)'),
     Param('control.accel_limit', 'float', 'm/s^2', 6.0, 0.0, 1000.0,
           doc='acceleration of the move to a jumped reference (0: rate limit only)'),
-    Param('control.antiwindup', 'bool', '', True, doc='conditional integration at the clamp'),
+    Param('control.antiwindup', 'bool', '', True,
+          doc='observer-form anti-windup with antiwindup.poles_* (false: none, L = 0)'),
     Param('control.prewarp_hz', 'float', 'Hz', 0.0, 0.0, 200.0,
           doc='Tustin prewarp frequency; 0 = plain Tustin'),
     Param('control.watchdog_ticks', 'int', '', 5, 1, 1000,
           doc='no (or stale) estimate for more ticks: zero speed, reported'),
     Param('control.switch_hold', 'float', 's', 0.0, 0.0, 1.0,
-          doc='integrator held this long after the active channel changes'),
+          doc='state of G frozen this long after the active channel changes'),
     Param('control.drive_check_tolerance', 'float', '', 0.01, 0.0, 1.0,
           doc='relative mismatch between velocity_controller and plant.drive gains to report'),
     Param('control.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),

@@ -1,7 +1,11 @@
-"""PositionController.request + update as compiled calls, for closed-loop kernels
-(core.closed_loop): reference shaper (clamp, rate and acceleration limit), prefilter F, Tustin integrator with
-hold and conditional anti-windup, lead/lag R, speed clamp (eq. 4.74-4.77), the same operations
-as the Python path. Scalars live in a state vector (C_*); F and R states are the objects' own.
+"""The position controller's per-tick operations, compiled: reference shaper (clamp, rate and
+acceleration limit), prefilter F, controller G with observer-form anti-windup, speed clamp
+(eqs. 4.74-4.77). This module is the implementation: PositionController and ReferenceShaper
+(Python, one call per tick) and the closed-loop kernels of core.closed_loop (many ticks per
+call) run these same functions on the same arrays, so both paths agree bit for bit.
+
+Scalars live in two vectors owned by the controller: constants ``k`` (K_*) and state ``c``
+(C_*); F's and G's states are the DiscreteSS objects' own arrays.
 """
 from __future__ import annotations
 
@@ -11,42 +15,37 @@ import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
-from .discrete import ss_step
+from .discrete import ss_output, ss_step
 
 drop_stale(__file__)
 
 # constants
-K_LIMIT, K_STEP, K_KDC, K_T, K_AW, K_WMAX, K_FDD, K_RDD, K_VMAX, K_ACCEL, K_TS = range(11)
-NK = 11
-# state
-C_TARGET, C_VALUE, C_STARTED, C_V, C_CLAMPED, C_HOLD, C_N_SAT, C_N_CLAMPREF, C_RATE = range(9)
-NC = 9
+K_LIMIT, K_STEP, K_WMAX, K_FDD, K_GDD, K_VMAX, K_ACCEL, K_TS = range(8)
+NK = 8
+# state; C_R, C_E, C_U: the last tick's prefiltered reference, error, unclamped output
+(C_TARGET, C_VALUE, C_STARTED, C_CLAMPED, C_HOLD, C_N_SAT, C_N_CLAMPREF, C_RATE,
+ C_R, C_E, C_U) = range(11)
+NC = 11
+
+
+def new_arrays(limit: float, step: float, vmax: float, accel: float, Ts: float):
+    """(k, c) of a controller that has not started (no target, no value)."""
+    k = np.zeros(NK)
+    k[K_LIMIT], k[K_STEP], k[K_VMAX], k[K_ACCEL], k[K_TS] = limit, step, vmax, accel, Ts
+    c = np.zeros(NC)
+    c[C_TARGET] = math.nan
+    return k, c
 
 
 def pack(ctl):
-    """(constants, state, arrays) of a PositionController; arrays are F's and R's own."""
-    ref = ctl.ref
-    k = np.zeros(NK)
-    k[K_LIMIT], k[K_STEP], k[K_KDC], k[K_T] = ref.limit, ref.step, ctl.k_dc, ctl.T
-    k[K_AW], k[K_WMAX], k[K_FDD], k[K_RDD] = ctl.antiwindup, ctl.omega_max, ctl.F._dd, ctl.R._dd
-    k[K_VMAX], k[K_ACCEL], k[K_TS] = ref.vmax, ref.accel, ref.Ts
-    c = np.zeros(NC)
-    c[C_TARGET] = ref.target if ref.target is not None else math.nan
-    c[C_STARTED] = ref.value is not None
-    c[C_VALUE] = ref.value if ref.value is not None else 0.0
-    c[C_V], c[C_CLAMPED], c[C_HOLD] = ctl.v, ctl.clamped, ctl.hold
-    c[C_RATE] = ref.rate
-    F, R = ctl.F, ctl.R
-    arrays = (F._ad, F._bd, F._cd, F.x, F._tmp, R._ad, R._bd, R._cd, R.x, R._tmp)
-    return k, c, arrays
+    """(constants, state, arrays) of a PositionController: its own arrays, not copies."""
+    F, G = ctl.F, ctl.G
+    return ctl.k, ctl.s, (F._ad, F._bd, F._cd, F.x, F._tmp,
+                          G._ad, G._bd, G._cd, ctl.L, G.x, G._tmp)
 
 
 def unpack(ctl, c) -> None:
-    """Scalars back into the controller; counted events added to its counters."""
-    ctl.ref.target = float(c[C_TARGET]) if math.isfinite(c[C_TARGET]) else None
-    ctl.ref.value = float(c[C_VALUE]) if c[C_STARTED] else None
-    ctl.v, ctl.clamped, ctl.hold = float(c[C_V]), int(c[C_CLAMPED]), int(c[C_HOLD])
-    ctl.ref.rate = float(c[C_RATE])
+    """Counted events of the kernels added to the controller's counters (and cleared)."""
     for name, i in (('saturated_ticks', C_N_SAT), ('clamped_references', C_N_CLAMPREF)):
         if c[i]:
             ctl.c.bump(name, int(c[i]))
@@ -69,45 +68,62 @@ def request(k, c, position) -> None:
 
 
 @njit(cache=True)
-def shape(k, c) -> None:
-    """ReferenceShaper.next: rate limit, or the acceleration-limited move to a jumped target."""
+def shape(k, c) -> float:
+    """ReferenceShaper.next: one tick towards the target; returns the shaped reference.
+
+    A target that moves at most vmax Ts per tick (a sine, a ramp) passes unchanged; a jump is a
+    time-optimal move with bounded rate and acceleration: the fastest rate from which the
+    reference can still stop on the target (discrete braking: from rate v, steps of a Ts cover
+    v^2/(2a) + v Ts/2), reached at most a Ts per tick."""
     delta = c[C_TARGET] - c[C_VALUE]
     step = k[K_STEP]
     if k[K_ACCEL] == 0.0 or (c[C_RATE] == 0.0 and abs(delta) <= step):
         c[C_VALUE] = c[C_TARGET] if abs(delta) <= step else \
             c[C_VALUE] + math.copysign(step, delta)
-        return
+        return c[C_VALUE]
     a, Ts = k[K_ACCEL], k[K_TS]
     brake = a * (math.sqrt(0.25 * Ts * Ts + 2.0 * abs(delta) / a) - 0.5 * Ts)
     want = math.copysign(min(k[K_VMAX], brake), delta)
     c[C_RATE] += max(-a * Ts, min(a * Ts, want - c[C_RATE]))
     if abs(delta) <= abs(c[C_RATE]) * Ts or abs(delta) <= a * Ts * Ts:
-        c[C_VALUE] = c[C_TARGET]
+        c[C_VALUE] = c[C_TARGET]                        # arrived: follow from here
         c[C_RATE] = 0.0
     else:
         c[C_VALUE] += c[C_RATE] * Ts
+    return c[C_VALUE]
 
 
 @njit(cache=True)
-def control(k, c, Fa, Fb, Fc, Fx, Ft, Ra, Rb, Rc, Rx, Rt, x_hat):
-    """PositionController.update(x_hat).speed_ref of a started controller."""
-    shape(k, c)
-    r = ss_step(Fa, Fb, Fc, k[K_FDD], Fx, c[C_VALUE], Ft)
+def control(k, c, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt, x_hat):
+    """PositionController.update(x_hat) of a started controller; returns the clamped speed.
+
+    u[k] = C x[k] + D e[k],  u_s[k] = clip(u[k], +-omega_max)
+    x[k+1] = A x[k] + B e[k] + L (u_s[k] - u[k])       (observer form, core.controller.antiwindup)
+    Unclamped, L (u_s - u) = 0: exactly Tustin(G). During an integrator hold (channel switch)
+    x is frozen and the output follows e through D only."""
+    r = ss_step(Fa, Fb, Fc, k[K_FDD], Fx, shape(k, c), Ft)
     e = r - x_hat
-    w = k[K_KDC] * e
-    if c[C_HOLD] > 0:
-        c[C_HOLD] -= 1
-        w = 0.0
-    elif k[K_AW] > 0.5 and c[C_CLAMPED] * w > 0:
-        w = 0.0
-    v_out = c[C_V] + 0.5 * k[K_T] * w
-    c[C_V] += k[K_T] * w
-    u = ss_step(Ra, Rb, Rc, k[K_RDD], Rx, v_out, Rt)
+    u = ss_output(Gc, k[K_GDD], Gx, e)
     wmax = k[K_WMAX]
     m = u if u < wmax else wmax                          # min(omega_max, u)
     u_sat = m if m > -wmax else -wmax                    # max(-omega_max, .)
+    if c[C_HOLD] > 0:
+        c[C_HOLD] -= 1
+    else:
+        n = Gx.shape[0]
+        d = u_sat - u
+        for i in range(n):
+            s = 0.0
+            for j in range(n):
+                s += Ga[i, j] * Gx[j]
+            Gt[i] = s + Gb[i] * e + Gl[i] * d
+        for i in range(n):
+            Gx[i] = Gt[i]
     clamped = (1 if u > u_sat else 0) - (1 if u < u_sat else 0)
     c[C_CLAMPED] = clamped
     if clamped != 0:
         c[C_N_SAT] += 1
+    c[C_R] = r
+    c[C_E] = e
+    c[C_U] = u
     return u_sat

@@ -12,19 +12,25 @@ from .lti import Zpk, from_num_den
 NAMES = ('position_controller', 'prefilter', 'velocity_controller')
 
 
-def write_controller_yaml(path, Gv: Zpk, G: Zpk, F: Zpk, header: str):
-    """controller: ros__parameters: {position_controller, prefilter, velocity_controller}."""
+def write_controller_yaml(path, Gv: Zpk, G: Zpk, F: Zpk, header: str, aw_poles=None):
+    """controller: ros__parameters: {position_controller, prefilter, velocity_controller,
+    antiwindup} (antiwindup: the poles of G while clamped, core.controller.antiwindup)."""
     params = {}
     for name, tf in zip(NAMES, (G, F, Gv)):
         num, den = tf.num_den()
         params[name] = {'num': num, 'den': den}
+    if aw_poles is not None:
+        p = np.asarray(aw_poles, complex)
+        params['antiwindup'] = {'poles_real': [float(v) for v in p.real],
+                                'poles_imag': [float(v) for v in p.imag]}
     body = yaml.safe_dump({'controller': {'ros__parameters': params}}, sort_keys=False,
                           default_flow_style=None, width=200)
     lines = ['# ' + ln if ln else '#' for ln in header.strip().splitlines()]
     lines += ['# units: position_controller G(s): m of error -> rad/s motor-speed reference;',
               '#        velocity_controller G_v(s): rad/s of speed error -> A current reference',
               '#        (eq. 4.65 incl. 1/k_T); prefilter F(s): m -> m. Continuous time,',
-              '#        coefficients in descending powers of s.']
+              '#        coefficients in descending powers of s. antiwindup: poles (rad/s) of G',
+              '#        while the speed clamp is active, placed at exp(s Ts) by the observer gain.']
     with open(path, 'w', encoding='utf-8') as fh:
         fh.write('\n'.join(lines) + '\n' + body)
 
@@ -41,6 +47,17 @@ def read_controller_yaml(path):
     except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as err:
         raise ParamError(f'{path}: cannot read controller YAML: {err}') from None
     return Gv, G, F
+
+
+def read_antiwindup_poles(path):
+    """The anti-windup poles of a controller YAML (complex array), None if it has none."""
+    from ..controller.antiwindup import poles_from_params
+    try:
+        with open(path, encoding='utf-8') as fh:
+            aw = yaml.safe_load(fh)['controller']['ros__parameters'].get('antiwindup')
+        return None if aw is None else poles_from_params(aw['poles_real'], aw['poles_imag'])
+    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as err:
+        raise ParamError(f'{path}: cannot read the anti-windup poles: {err}') from None
 
 
 def _fmt(v):
@@ -87,6 +104,9 @@ ROWS = [
     ('step_settling_s', 'digital step of F T, nominal: 2 % settling time (s)', None),
     ('step_overshoot_worst_pct', 'digital step of F T, worst plant: overshoot (%)', 'step_family'),
     ('step_settling_worst_s', 'digital step of F T, worst plant: 2 % settling time (s)', None),
+    ('aw_circle_min_re', 'anti-windup: min Re H over family and grid (circle criterion, >= 0)',
+     'aw_circle'),
+    ('aw_circle_worst_w', '  at w (rad/s)', None),
 ]
 
 

@@ -129,8 +129,9 @@ def family_worst(Pw, Pd, Gw) -> dict:
             'PdS_max': np.abs(Pd * S).max(0)}
 
 
-def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
-    """All figures of the report for one controller set; values in SI/dB/deg/Hz."""
+def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None, aw_poles=None) -> dict:
+    """All figures of the report for one controller set; values in SI/dB/deg/Hz. With the
+    anti-windup poles: the circle criterion of the clamped loop on every plant (qft.antiwindup)."""
     r = {}
     wd = dense_grid(spec)
     # velocity loop
@@ -207,6 +208,9 @@ def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
     r['step_worst_plant'] = int(np.argmax(ts[:-1]))
     r['step_nominal_t'] = np.arange(y.shape[1]) * Ts
     r['step_nominal_y'] = spec['digital.step'] * y[-1]
+    if aw_poles is not None:
+        from .antiwindup import circle_figures
+        r.update(circle_figures(G, aw_poles, dl, wd))
     if pbounds is not None:
         L0 = casc.P_omega(pbounds.w)[-1] * G.freq(pbounds.w)
         r['pos_bound_violation_db'] = float(qb.violation_db(pbounds.merged, L0).max())
@@ -235,5 +239,8 @@ def analyse(fam, spec, Gv, G, F, vbounds=None, pbounds=None) -> dict:
         r['pass']['vel_bounds'] = r['vel_bound_violation_db'] <= tol
     if pbounds is not None:
         r['pass']['pos_bounds'] = r['pos_bound_violation_db'] <= tol
+    if aw_poles is not None:
+        # Re H >= 0 (to rounding: H -> 0 at w -> 0 by the plant's integrator)
+        r['pass']['aw_circle'] = r['aw_circle_min_re'] >= -tol
     r['all_pass'] = bool(all(r['pass'].values()))
     return r
