@@ -68,17 +68,6 @@ def test_discrete_loop_keeps_continuous_margins(path):
     assert pm_d > 0 and gm_d > 0
 
 
-def step_response(ctl, amp, n=1500):
-    plant = EhaPlant(P, seed=1)
-    ctl.start(0.0)
-    ctl.request(amp)
-    xs = np.empty(n)
-    for k in range(n):
-        plant.step(ctl.update(plant.truth().position).speed_ref, 0.0)
-        xs[k] = plant.truth().position
-    return xs
-
-
 @pytest.fixture(scope='module')
 def saturation():
     """qft.antiwindup.saturation_figures of the stack's controller with and without anti-windup

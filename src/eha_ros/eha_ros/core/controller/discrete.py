@@ -56,9 +56,8 @@ def ss_output(cd, dd, x, u):
 
 
 @njit(cache=True)
-def ss_step(Ad, bd, cd, dd, x, u, tmp):
-    """y[k] = C x + D u, then x <- A x + B u in place (``tmp`` n scratch); returns y[k]."""
-    y = ss_output(cd, dd, x, u)
+def ss_advance(Ad, bd, x, u, tmp):
+    """x <- A x + B u in place (``tmp`` n scratch)."""
     n = x.shape[0]
     for i in range(n):
         s = 0.0
@@ -67,6 +66,13 @@ def ss_step(Ad, bd, cd, dd, x, u, tmp):
         tmp[i] = s + bd[i] * u
     for i in range(n):
         x[i] = tmp[i]
+
+
+@njit(cache=True)
+def ss_step(Ad, bd, cd, dd, x, u, tmp):
+    """y[k] = C x + D u, then x <- A x + B u in place (``tmp`` n scratch); returns y[k]."""
+    y = ss_output(cd, dd, x, u)
+    ss_advance(Ad, bd, x, u, tmp)
     return y
 
 

@@ -78,6 +78,7 @@ class PositionController:
         else:
             self.L = np.zeros(self.G.n)
         self.k[S.K_WMAX], self.k[S.K_FDD], self.k[S.K_GDD] = omega_max, self.F._dd, self.G._dd
+        self._arrays = S.pack(self)[2]     # F, G and L arrays: changed in place, never replaced
 
     @classmethod
     def from_params(cls, p: dict, counters: Counters | None = None) -> 'PositionController':
@@ -123,8 +124,7 @@ class PositionController:
     def update(self, position_estimate: float) -> ControlOutput:
         if not self.started:
             self.start(position_estimate)
-        _, _, arrays = S.pack(self)
-        u_sat = S.control(self.k, self.s, *arrays, float(position_estimate))
+        u_sat = S.control(self.k, self.s, *self._arrays, float(position_estimate))
         S.unpack(self, self.s)
         s = self.s
         return ControlOutput(float(u_sat), bool(s[S.C_CLAMPED]), float(s[S.C_R]),

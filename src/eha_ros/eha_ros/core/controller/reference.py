@@ -15,13 +15,15 @@ class ReferenceShaper:
 
     def __init__(self, stroke: float, margin: float, rate_limit: float, Ts: float,
                  counters: Counters, accel_limit: float = 0.0):
-        self.limit = stroke / 2.0 - margin
-        self.vmax = rate_limit
-        self.step = rate_limit * Ts
-        self.accel = accel_limit    # [m/s^2]; 0: rate limit only
-        self.Ts = Ts
         self.c = counters
-        self.k, self.s = S.new_arrays(self.limit, self.step, rate_limit, accel_limit, Ts)
+        # accel_limit [m/s^2]; 0: rate limit only
+        self.k, self.s = S.new_arrays(stroke / 2.0 - margin, rate_limit * Ts, rate_limit,
+                                      accel_limit, Ts)
+
+    @property
+    def limit(self) -> float:
+        """References are clamped to +-limit (stroke/2 - margin) [m]."""
+        return float(self.k[S.K_LIMIT])
 
     @property
     def target(self):

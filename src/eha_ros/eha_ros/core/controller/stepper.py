@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
-from .discrete import ss_output, ss_step
+from .discrete import ss_advance, ss_output, ss_step
 
 drop_stale(__file__)
 
@@ -110,15 +110,10 @@ def control(k, c, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt, x_hat):
     if c[C_HOLD] > 0:
         c[C_HOLD] -= 1
     else:
-        n = Gx.shape[0]
+        ss_advance(Ga, Gb, Gx, e, Gt)
         d = u_sat - u
-        for i in range(n):
-            s = 0.0
-            for j in range(n):
-                s += Ga[i, j] * Gx[j]
-            Gt[i] = s + Gb[i] * e + Gl[i] * d
-        for i in range(n):
-            Gx[i] = Gt[i]
+        for i in range(Gx.shape[0]):
+            Gx[i] += Gl[i] * d
     clamped = (1 if u > u_sat else 0) - (1 if u < u_sat else 0)
     c[C_CLAMPED] = clamped
     if clamped != 0:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import optimize
 
-from ..controller.antiwindup import circle_h
+from ..controller.antiwindup import circle_h, observer_gain
 from ..controller.discrete import tustin
 
 # saturation runs: (name, step [m], rate limit [m/s], held ticks, ticks)
@@ -45,7 +45,6 @@ def circle_grid(dl, w):
 def circle_figures(G, poles, dl, w, Pz=None) -> dict:
     """min Re H over the family and the grid (w < pi/Ts) and where it is; Pz: plants_z at w
     (circle_grid) if already computed."""
-    from ..controller.antiwindup import observer_gain
     Ad, Bd, Cd, Dd = tustin(*G.ss(), dl.Ts, dl.pw)
     L = observer_gain(Ad, Cd, poles, dl.Ts)
     if Pz is None:
@@ -91,12 +90,16 @@ def saturation_figures(G, F, poles, params: dict) -> dict:
     return out
 
 
+def n_pairs(n: int) -> int:
+    """Complex pairs among n design poles: all but one real pole (odd n) or two (even n)."""
+    return (n - 1) // 2 if n % 2 else (n - 2) // 2
+
+
 def pole_vector(x, n: int) -> np.ndarray:
     """Poles from the design vector: n_r real (log10 |s|) then pairs (log10 w_n, zeta)."""
-    n_pairs = (n - 1) // 2 if n % 2 else (n - 2) // 2
-    n_real = n - 2 * n_pairs
+    n_real = n - 2 * n_pairs(n)
     p = [-10.0 ** v for v in x[:n_real]]
-    for i in range(n_pairs):
+    for i in range(n_pairs(n)):
         wn, z = 10.0 ** x[n_real + 2 * i], float(np.clip(x[n_real + 2 * i + 1], 0.05, 0.995))
         p += [wn * complex(-z, np.sqrt(1 - z * z)), wn * complex(-z, -np.sqrt(1 - z * z))]
     return np.array(p)
@@ -114,9 +117,9 @@ def box(G, n: int):
     """Design-vector bounds: real poles and pair frequencies from a tenth of G's slowest zero to
     pi/Ts-ish (3000 rad/s), damping 0.1-0.99."""
     slow = min([abs(z) for z in G.zeros if abs(z) > 1e-9] or [1.0])
-    n_pairs = (n - 1) // 2 if n % 2 else (n - 2) // 2
-    lo = [np.log10(0.1 * slow)] * (n - 2 * n_pairs) + [np.log10(slow), 0.1] * n_pairs
-    hi = [np.log10(3000.0)] * (n - 2 * n_pairs) + [np.log10(3000.0), 0.99] * n_pairs
+    m = n_pairs(n)
+    lo = [np.log10(0.1 * slow)] * (n - 2 * m) + [np.log10(slow), 0.1] * m
+    hi = [np.log10(3000.0)] * (n - 2 * m) + [np.log10(3000.0), 0.99] * m
     return list(zip(lo, hi))
 
 
