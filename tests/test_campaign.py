@@ -240,8 +240,10 @@ def test_cli_ctrl_c_keeps_rows_and_resume_finishes(tmp_path):
     try:
         parts = out / 'parts'
         deadline = time.monotonic() + 120
+        # a finished part: chunk-*.parquet (the writer's .chunk-*.tmp.parquet is renamed to it)
         while time.monotonic() < deadline and not (
-                parts.is_dir() and any(f.suffix == '.parquet' for f in parts.iterdir())):
+                parts.is_dir() and any(f.name.startswith('chunk-') and f.suffix == '.parquet'
+                                       for f in parts.iterdir())):
             time.sleep(0.05)
         p.send_signal(signal.SIGINT)
         _, err = p.communicate(timeout=120)
