@@ -21,10 +21,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, 'out', 'redundancy', 'batch')
 T_SWITCH = 3.0
 PERIOD = 1.0 / 3.0
-# The controller's integrator hold on a switch (control.switch_hold) opens the position loop:
-# G = K/s R(s) has all its action behind the held integrator, and stopping it steps R's
-# feed-through. With the pre-spun valve cross-over the flow hand-over needs no hold, so the
-# figures are measured with it off (see the test that measures it with the hold on).
+# The controller's hold on a switch (control.switch_hold) freezes G's state and so opens the
+# position loop for its duration. With the pre-spun valve cross-over the flow hand-over needs
+# no hold, so the figures are measured with it off (see the test that measures it with the
+# hold on: 0.013 mm against 0.010 mm extra deviation with the stack's controller).
 HOLD = 0.0
 
 

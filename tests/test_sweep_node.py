@@ -59,6 +59,25 @@ def test_interrupt_mid_sweep_keeps_finished_points(stack, tmp_path):
     assert 'Traceback' not in err
 
 
+def test_stiffness_over_dds(stack, tmp_path):
+    # mode stiffness: the sweep node drives /eha/sim/load_force (5 kN at 1, 4, 7 Hz) and holds
+    # the reference; the nominal loop on the estimate meets eq. 4.60 (>= 49 kN/mm) at each
+    cmd = node_command('sweep', extra=['-p', 'use_sim_time:=true',
+                                       '-p', 'sweep:sweep.mode:=stiffness',
+                                       '-p', f'sweep:sweep.out_dir:={tmp_path}',
+                                       '-p', 'sweep:sweep.run_name:=st'])
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=240)
+    summary = json.load(open(tmp_path / 'st' / 'summary.json'))
+    print(summary['stiffness'])
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert summary['complete'] and summary['excite'] == 'load'
+    assert [r['freq_hz'] for r in summary['stiffness']] == [1.0, 4.0, 7.0]
+    assert all(r['stiffness_kn_per_mm'] >= r['bound_kn_per_mm'] >= 49.0
+               for r in summary['stiffness'])
+    assert all(p['coherence'] > 0.8 for p in summary['points'])
+    assert (tmp_path / 'st' / 'stiffness.png').exists()
+
+
 def test_bad_sweep_parameter_stops_node_with_one_line():
     res = subprocess.run(node_command('sweep', extra=['-p', 'sweep:sweep.amplitude:=0.08']),
                          capture_output=True, text=True, timeout=120)

@@ -63,3 +63,88 @@ def test_bad_sweep_options_one_line(args, words, tmp_path):
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and words in lines[0] and 'Traceback' not in res.stderr, res.stderr
     assert not os.listdir(tmp_path), 'nothing is written for a refused sweep'
+
+
+def feed(session, plan, system, load=False):
+    """Drive a session with a known discrete system's response, tick by tick, until it ends."""
+    seq0 = 100
+    session.start(seq0)
+    k, u = 0, []
+    A, B, C, D = sps.tf2ss(system.num, system.den)
+    state = np.zeros(A.shape[0])
+    while k < session.n_run:
+        v = session.load_for(seq0 + k) if load else session.reference_for(seq0 + k)
+        y = float((C @ state)[0] + D[0, 0] * v)
+        state = A @ state + B[:, 0] * v
+        session.record('load' if load else 'reference', seq0 + k, v)
+        session.record('truth', seq0 + k, y)
+        session.progress(seq0 + k)
+        u.append(v)
+        k += 1
+    return np.array(u)
+
+
+def test_sweep_stops_after_the_first_point_below_3db(tmp_path):
+    # a second-order lag with its -3 dB point at 15.04 Hz: the sweep planned to 30 Hz stops at
+    # 16 Hz, brackets the bandwidth and is complete; the reference rests at the offset after it
+    plan = SteppedSine(1, 1, 30, 5, 0.1, 1e-3, offset=2e-3)
+    wn = 2 * np.pi * 15.0
+    sys_ = sps.cont2discrete(([wn ** 2], [1, 1.4 * wn, wn ** 2]), 1e-3, 'bilinear')
+    d = sps.dlti(np.ravel(sys_[0]), sys_[1], dt=1e-3)
+    s = SweepSession(plan, str(tmp_path), {}, background_writes=False, stop_at_db=-3.0)
+    u = feed(s, plan, d)
+    summary = s.finish()
+    freqs = [p['freq_hz'] for p in summary['points']]
+    assert freqs == list(range(1, len(freqs) + 1)) and summary['points'][-1]['gain_db'] < -3.0
+    assert all(p['gain_db'] >= -3.0 for p in summary['points'][:-1])
+    assert summary['complete'] and summary['stopped_at_bandwidth']
+    _, h = sps.dfreqresp(d, w=2 * np.pi * np.linspace(1, 30, 2901) * 1e-3)
+    f_true = np.linspace(1, 30, 2901)[np.argmax(20 * np.log10(np.abs(h)) < -3.0)]
+    assert freqs[-1] == np.ceil(f_true)
+    assert summary['bandwidth_hz'] == pytest.approx(f_true, abs=0.2)   # dB over log f, 1 Hz steps
+    stop = plan.segments[len(freqs)].start                       # where the next sine would start
+    assert np.all(u[stop:] == 2e-3) and s.n_run < plan.n_ticks
+    assert s.reference_for(100 + stop + 5) == 2e-3
+
+
+def test_stepped_sine_stays_below_max_accel():
+    plan = SteppedSine(1, 1, 50, 4, 0.1, 1e-3, max_accel=5.0)
+    for seg in plan.segments:
+        a = np.max(np.abs(np.diff(plan.array()[seg.start:seg.stop], 2))) / 1e-6   # inside the sine
+        assert a <= 5.0 * 1.01
+        assert seg.amplitude == pytest.approx(min(1e-3, 5.0 / (2 * np.pi * seg.freq_hz) ** 2))
+
+
+def test_load_session_reports_stiffness(tmp_path):
+    # x = F / k with a pure spring of 80 kN/mm: |F|/|x| = 80 at every frequency; reference held
+    plan = SteppedSine(0, 0, 0, 6, 0.1, 5e3, freqs=(1.0, 4.0, 7.0))
+    spring = sps.dlti([1 / 80e6], [1], dt=1e-3)
+    s = SweepSession(plan, str(tmp_path), {}, background_writes=False, excite='load',
+                     position=3e-3, stiffness_bound=lambda f: 49.0)
+    feed(s, plan, spring, load=True)
+    summary = s.finish()
+    assert [r['stiffness_kn_per_mm'] for r in summary['stiffness']] == pytest.approx([80] * 3)
+    assert summary['stiffness_min_ratio_to_bound'] == pytest.approx(80 / 49)
+    assert summary['stiffness_meets_bound'] and summary['bandwidth_hz'] is None
+    assert s.reference_for(100 + plan.segments[1].start + 3) == 3e-3
+    assert (tmp_path / 'stiffness.png').exists() and not (tmp_path / 'bode.png').exists()
+
+
+def test_main_job_sweeps_to_the_bandwidth_and_measures_stiffness(tmp_path):
+    # the default sweep runs until the first frequency below -3 dB (stack controller: about
+    # 19-20 Hz, the linear model predicts 19); the stiffness run: eq. 4.60 on the nominal plant
+    res = subprocess.run([RUN, '--mode', 'batch', '--out', str(tmp_path), '--name', 'bw'],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stdout + res.stderr
+    s = json.load(open(tmp_path / 'bw' / 'summary.json'))
+    print('bandwidth', s['bandwidth_hz'], 'last point', s['points'][-1])
+    assert s['complete'] and s['stopped_at_bandwidth'] and 15.0 <= s['bandwidth_hz'] <= 25.0
+    assert s['points'][-1]['gain_db'] < -3.0 and all(p['coherence'] > 0.99 for p in s['points'])
+    res = subprocess.run([RUN, '--mode', 'batch', '--stiffness', '--out', str(tmp_path),
+                          '--name', 'st'], capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stdout + res.stderr
+    s = json.load(open(tmp_path / 'st' / 'summary.json'))
+    print('stiffness', s['stiffness'])
+    assert [r['freq_hz'] for r in s['stiffness']] == [1.0, 4.0, 7.0]
+    assert s['stiffness_meets_bound'] and s['stiffness_min_kn_per_mm'] >= 49.0
+    assert 'dynamic stiffness: min' in res.stdout

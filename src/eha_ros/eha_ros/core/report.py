@@ -54,6 +54,36 @@ def _jsonable(obj):
     raise TypeError(type(obj))
 
 
+def save_png(fig, path: str) -> None:
+    """Write a matplotlib figure atomically (a reader never sees half a PNG) and close it."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    tmp = path + '.tmp.png'
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+def stiffness_png(path: str, rows: list[dict], title: str = '') -> None:
+    """Measured |F_L|/|x| per frequency (kN/mm) against the eq. 4.60 bound where given."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    f = [r['freq_hz'] for r in rows]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.semilogx(f, [r['stiffness_kn_per_mm'] for r in rows], 'o-', color='C0', label='measured')
+    if rows and all('bound_kn_per_mm' in r for r in rows):
+        ax.semilogx(f, [r['bound_kn_per_mm'] for r in rows], 'k--', lw=1.5,
+                    label='1/|M| (eq. 4.60)')
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel('frequency [Hz]')
+    ax.set_ylabel('|F_L|/|x| [kN/mm]')
+    ax.grid(True, which='both', alpha=0.3)
+    ax.legend()
+    ax.set_title(title)
+    save_png(fig, path)
+
+
 def bode_png(path: str, points: list[dict], model=None, title: str = '') -> None:
     """Measured gain/phase points with an optional model overlay (freqs_hz, gain_db, phase_deg)."""
     import matplotlib
@@ -75,8 +105,4 @@ def bode_png(path: str, points: list[dict], model=None, title: str = '') -> None
     ax2.grid(True, which='both', alpha=0.3)
     ax1.legend()
     ax1.set_title(title)
-    fig.tight_layout()
-    tmp = path + '.tmp.png'
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, path)
+    save_png(fig, path)

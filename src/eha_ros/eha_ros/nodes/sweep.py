@@ -1,6 +1,10 @@
 """sweep node: stepped sine (TwinCAT Fr_Test semantics, appendix B.1), chirp or step on
 eha/reference, locked to the plant's ticks; records state, estimate, truth and command by seq,
-analyses each finished frequency (appendix B.2) and writes out/<run>/ as it goes.
+analyses each finished frequency (appendix B.2) and writes out/<run>/ as it goes. The stepped
+sine stops after the first frequency below -3 dB (sweep.stop_at_bandwidth). Mode stiffness:
+a stepped sine of the external load on eha/sim/load_force with the reference held at the
+offset; |F_L|/|x| per frequency against the bound of eq. 4.60 (the applied force is taken from
+eha/sim/truth).
 
 On each eha/state(k) it publishes the reference of tick k + lead_ticks stamped with that seq;
 the controller applies it when it handles tick k + lead_ticks, so the reference timing is exact
@@ -17,7 +21,7 @@ from ..core.params import default_config_dir, load
 from ..core.report import run_dir
 from ..core.sweep.params import SCHEMA, build_plan
 from ..core.stats import LoopStats
-from ..core.sweep.session import SweepSession, print_table
+from ..core.sweep.session import from_params, print_table
 from . import diag
 from .common import declare_and_validate, node_base, run, stream_qos
 
@@ -41,8 +45,8 @@ def model_overlay(p: dict):
 
 def make_node(params: dict):
     Node = node_base()
-    from eha_msgs.msg import (ActuatorCommand, ActuatorState, PlantTruth, PositionEstimate,
-                              PositionReference)
+    from eha_msgs.msg import (ActuatorCommand, ActuatorState, ExternalLoad, PlantTruth,
+                              PositionEstimate, PositionReference)
 
     plan = build_plan(params)          # one-line error for a bad sweep, before ROS starts
 
@@ -57,10 +61,13 @@ def make_node(params: dict):
             meta = {'mode': p['sweep.mode'], 'amplitude_m': p['sweep.amplitude'],
                     'offset_m': p['sweep.offset'], 'source': 'sweep node over DDS',
                     'controller_file': ctl_file}
-            self.session = SweepSession(plan, self.out, meta, p['sweep.output'],
-                                        p['sweep.abort_error'], p['sweep.abort_ticks'], model,
-                                        settle_periods=p['sweep.settle_periods'])
+            self.session = from_params(p, plan, self.out, meta, model)
             self.ref_msg = PositionReference()
+            self.load_msg = ExternalLoad()
+            self.pub_load = None
+            if self.session.excite == 'load':
+                self.pub_load = self.create_publisher(ExternalLoad, 'eha/sim/load_force',
+                                                      stream_qos())
             self.loop = LoopStats(plan.Ts)
             self.ready_since = None
             self.commands_seen = 0
@@ -84,6 +91,7 @@ def make_node(params: dict):
 
         def on_truth(self, msg):
             self.session.record('truth', msg.seq, msg.position)
+            self.session.record('load', msg.seq, msg.load_force)
 
         def on_estimate(self, msg):
             self.session.record('estimate', msg.seq, msg.position)
@@ -104,7 +112,7 @@ def make_node(params: dict):
                 now = time.monotonic()
                 self.ready_since = self.ready_since or now
                 if now - self.ready_since < self.p['sweep.start_delay']:
-                    self.send(k + self.lead, self.plan.offset)
+                    self.send(k + self.lead, s.reference_for(k + self.lead))
                     return
                 s.start(k + self.lead)
                 self.get_logger().info(f'sweep started at tick {k + self.lead}')
@@ -113,28 +121,30 @@ def make_node(params: dict):
             s.record('motor_speed_1', k, msg.motor_speed[1])
             s.record('active_channel', k, msg.active_channel)
             s.record('reference', k, s.reference_for(k))
-            self.send(k + self.lead, s.reference_for(k + self.lead))
+            self.send(k + self.lead, s.reference_for(k + self.lead), s.load_for(k + self.lead))
             for point in s.progress(k - MARGIN_TICKS):
-                self.get_logger().info(f'{point.freq_hz:6.2f} Hz: {point.gain_db:7.2f} dB '
-                                       f'{point.phase_deg:7.1f} deg coherence '
-                                       f'{point.coherence:.4f}')
-            if not self.done and k - s.seq0 >= s.n + MARGIN_TICKS:
+                self.get_logger().info(s.describe(point))
+            if not self.done and k - s.seq0 >= s.n_run + MARGIN_TICKS:
                 self.end()
 
-        def send(self, seq, position):
+        def send(self, seq, position, load=0.0):
             m = self.ref_msg
             m.seq = int(seq)
             m.position = float(position)
             self.pub.publish(m)
+            if self.pub_load is not None:
+                self.load_msg.force = float(load)
+                self.pub_load.publish(self.load_msg)
 
         def end(self, reason=None):
             """Finish the report; reference back to the offset; exit if asked to."""
             if self.session.finished:
                 return
-            self.send(0, self.plan.offset)
+            self.send(0, self.session.position)
             summary = self.session.finish(reason=reason)
             print_table(summary, lambda line: self.get_logger().info(line))
-            self.get_logger().info(f'report: {self.out}/ (summary.json, data.csv, bode.png)')
+            self.get_logger().info(f'report: {self.out}/ (summary.json, data.csv, '
+                                   f'{"stiffness" if self.session.excite == "load" else "bode"}.png)')
             if not summary['complete']:
                 self.exit_code = 1
             if self.p['sweep.exit_when_done']:

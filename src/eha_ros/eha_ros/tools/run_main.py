@@ -30,12 +30,22 @@ def parse(argv):
         prog='scripts/run',
         description='Run the simulated EHA stack with a stepped-sine sweep (thesis Fig. 4.51) '
                     'and write a report (summary.json, data.csv, bode.png) under out/<run>/. '
-                    'Sweep defaults come from config/sweep.yaml (1-15 Hz, 1 mm).')
+                    'Sweep defaults come from config/sweep.yaml (1 mm from 1 Hz in 1 Hz steps, '
+                    'until the first frequency below -3 dB, at most Nyquist/10 = 50 Hz); the '
+                    'closed-loop bandwidth is interpolated between the last two points. '
+                    '--stiffness measures the dynamic stiffness instead (thesis Fig. 4.52).')
     ap.add_argument('--mode', choices=MODES, default='lockstep',
                     help='lockstep (default): nodes over DDS, the plant waits for each command; '
                          'realtime: wall clock at 1 kHz, loop nodes composed in one process '
                          '(eha_loop), the sweep over DDS; batch: core objects in one process, '
                          'no DDS')
+    ap.add_argument('--stiffness', action='store_true',
+                    help='dynamic stiffness: a stepped sine of the external load force '
+                         '(sweep.load_amplitude, 5 kN, at sweep.stiffness_freqs, 1/4/7 Hz) with '
+                         'the reference held at the offset; reports |F_L|/|x| against the '
+                         'eq. 4.60 bound (>= 49 kN/mm up to 7 Hz); stiffness.png')
+    ap.add_argument('--no-stop', action='store_true',
+                    help='sweep every frequency up to --max-hz, also beyond the -3 dB point')
     ap.add_argument('--amplitude-mm', type=float, help='sine amplitude [mm]')
     ap.add_argument('--offset-mm', type=float, help='centre position [mm]')
     ap.add_argument('--start-hz', type=float, help='first frequency [Hz]')
@@ -55,7 +65,9 @@ def sweep_overrides(args) -> dict:
     pairs = {'sweep.amplitude': None if args.amplitude_mm is None else args.amplitude_mm * 1e-3,
              'sweep.offset': None if args.offset_mm is None else args.offset_mm * 1e-3,
              'sweep.start_hz': args.start_hz, 'sweep.increment_hz': args.step_hz,
-             'sweep.max_hz': args.max_hz, 'sweep.periods': args.periods}
+             'sweep.max_hz': args.max_hz, 'sweep.periods': args.periods,
+             'sweep.mode': 'stiffness' if args.stiffness else None,
+             'sweep.stop_at_bandwidth': False if args.no_stop else None}
     return {k: v for k, v in pairs.items() if v is not None}
 
 
@@ -72,10 +84,17 @@ def run(args) -> int:
     sweep_p = node_params('sweep', SCHEMA, args.config, {f'sweep:{k}': v for k, v in over.items()})
     plan = build_plan(sweep_p)
     out = run_dir(args.out, args.name)
-    print(f'run: {args.mode}, stepped sine {sweep_p["sweep.start_hz"]:g}-'
-          f'{sweep_p["sweep.max_hz"]:g} Hz every {sweep_p["sweep.increment_hz"]:g} Hz, '
-          f'{sweep_p["sweep.amplitude"] * 1e3:g} mm, {sweep_p["sweep.periods"]} periods '
-          f'({plan.n_ticks * plan.Ts:.0f} s of sweep); config {args.config}; report {out}/',
+    if args.stiffness:
+        what = (f'load {sweep_p["sweep.load_amplitude"] / 1e3:g} kN at '
+                f'{", ".join("%g" % f for f in sweep_p["sweep.stiffness_freqs"])} Hz, '
+                f'reference held at {sweep_p["sweep.offset"] * 1e3:g} mm')
+    else:
+        what = (f'stepped sine {sweep_p["sweep.start_hz"]:g}-{sweep_p["sweep.max_hz"]:g} Hz every '
+                f'{sweep_p["sweep.increment_hz"]:g} Hz'
+                f'{" (stops below -3 dB)" if sweep_p["sweep.stop_at_bandwidth"] else ""}, '
+                f'{sweep_p["sweep.amplitude"] * 1e3:g} mm')
+    print(f'run: {args.mode}, {what}, {sweep_p["sweep.periods"]} periods '
+          f'({plan.n_ticks * plan.Ts:.0f} s planned); config {args.config}; report {out}/',
           flush=True)
     if args.mode == 'batch':
         summary = run_batch(args, sweep_p, plan, out)
@@ -84,7 +103,7 @@ def run(args) -> int:
     from ..core.sweep.session import print_table
     print()
     print_table(summary)
-    print(f'report: {out}/ (summary.json, data.csv, bode.png'
+    print(f'report: {out}/ (summary.json, data.csv, {"stiffness" if args.stiffness else "bode"}.png'
           f'{", logs/" if args.mode != "batch" else ""})')
     return 0 if summary.get('complete') else 1
 
@@ -95,46 +114,44 @@ def run_batch(args, p, plan, out) -> dict:
     import numpy as np
 
     from ..core.batch import BatchStack
-    from ..core.sweep.session import SweepSession
+    from ..core.sweep.session import from_params
     from ..nodes.sweep import model_overlay
     stack = BatchStack(args.config)
     model, ctl_file = model_overlay(p)
-    meta = {'mode': 'stepped', 'amplitude_m': p['sweep.amplitude'], 'offset_m': p['sweep.offset'],
+    meta = {'mode': p['sweep.mode'], 'amplitude_m': p['sweep.amplitude'],
+            'offset_m': p['sweep.offset'],
             'source': 'batch (plant, estimator, controller cores in one process)',
             'controller_file': ctl_file}
-    session = SweepSession(plan, out, meta, p['sweep.output'], p['sweep.abort_error'],
-                           p['sweep.abort_ticks'], model, background_writes=False,
-                           settle_periods=p['sweep.settle_periods'])
+    session = from_params(p, plan, out, meta, model, background_writes=False)
     warmup = int(round(0.5 / stack.Ts))
-    stack.run(np.full(warmup, plan.offset))      # let the estimator settle at the offset
+    stack.run(np.full(warmup, session.position))  # let the estimator settle at the offset
     session.start(stack.k)
     chunk = int(round(0.5 / stack.Ts))           # ticks per BatchStack.run (compiled segments)
     t0 = time.perf_counter()
     try:
-        while stack.k - session.seq0 < plan.n_ticks:
+        while stack.k - session.seq0 < session.n_run:
             k0 = stack.k
-            m = min(chunk, plan.n_ticks - (k0 - session.seq0))
-            r = stack.run([session.reference_for(k) for k in range(k0, k0 + m)])
+            m = min(chunk, session.n_run - (k0 - session.seq0))
+            ks = range(k0, k0 + m)
+            r = stack.run([session.reference_for(k) for k in ks], [session.load_for(k) for k in ks])
             done = m
             for i, x_hat in enumerate(r['estimate']):   # same tick of abort as tick by tick
                 if session.check_error(k0 + i, float(x_hat)):
                     done = i + 1
                     break
             for col in ('reference', 'measured', 'estimate', 'truth', 'command',
-                        'motor_speed_0', 'motor_speed_1', 'active_channel'):
+                        'motor_speed_0', 'motor_speed_1', 'active_channel', 'load'):
                 session.record_many(col, k0, r[col][:done])
             if done < m:
                 break
             for pt in session.progress(k0 + m - 1):
-                print(f'  {pt.freq_hz:6.2f} Hz: {pt.gain_db:7.2f} dB {pt.phase_deg:7.1f} deg '
-                      f'coherence {pt.coherence:.4f}', flush=True)
+                print('  ' + session.describe(pt), flush=True)
     except KeyboardInterrupt:
         return session.finish(reason='interrupted')
     wall = time.perf_counter() - t0
     session.meta['wall_s'] = wall
-    session.meta['simulated_s'] = plan.n_ticks * plan.Ts
-    print(f'  {plan.n_ticks * plan.Ts:.1f} s simulated in {wall:.1f} s '
-          f'({plan.n_ticks * plan.Ts / wall:.1f}x real time)')
+    session.meta['simulated_s'] = sim_s = session.n_run * plan.Ts
+    print(f'  {sim_s:.1f} s simulated in {wall:.1f} s ({sim_s / wall:.1f}x real time)')
     return session.finish()
 
 

@@ -359,7 +359,8 @@ def sweep_figures(s, p, Ts):
 
 def stiffness_figures(s, p, Ts):
     """Dynamic stiffness |F_L|/|x| per frequency in kN/mm (Fig. 4.52)."""
-    return {f'stiffness_kn_per_mm_{_fhz(f)}hz': float(10 ** (-pt.gain_db / 20.0) / 1e6)
+    from ..sweep.analysis import stiffness_kn_per_mm
+    return {f'stiffness_kn_per_mm_{_fhz(f)}hz': stiffness_kn_per_mm(pt)
             for f, pt in _stepped(s, p, Ts, 'load')}
 
 

@@ -101,3 +101,33 @@ def summarize(points: list[Point]) -> dict:
         'peak_gain_freq_hz': float(f[peak]) if pts else None,
         'points': [p.as_dict() for p in pts],
     }
+
+
+def stiffness_kn_per_mm(point: Point) -> float:
+    """|F_L|/|x| in kN/mm from the gain of x against the load force (m/N, in dB)."""
+    return float(10 ** (-point.gain_db / 20.0) / 1e6)
+
+
+def stiffness_bound(config_dir: str | None = None):
+    """f_hz -> 1/|M(j 2 pi f)| in kN/mm, the stiffness bound of eq. 4.60 (config/qft_spec.yaml)."""
+    from ..sim.linear import default_spec
+    spec = default_spec(config_dir)
+    return lambda f_hz: float(1.0 / abs(spec.M(2 * math.pi * float(f_hz))) / 1e6)
+
+
+def stiffness_summary(points: list[Point], bound=None) -> dict:
+    """Per-frequency |F_L|/|x| of a load sweep (kN/mm), with the eq. 4.60 bound when given,
+    the smallest ratio to it and whether every frequency meets it."""
+    pts = sorted(points, key=lambda p: p.freq_hz)
+    rows = []
+    for p in pts:
+        row = {'freq_hz': p.freq_hz, 'stiffness_kn_per_mm': stiffness_kn_per_mm(p)}
+        if bound is not None:
+            row['bound_kn_per_mm'] = bound(p.freq_hz)
+        rows.append(row)
+    ratio = [r['stiffness_kn_per_mm'] / r['bound_kn_per_mm'] for r in rows
+             if 'bound_kn_per_mm' in r]
+    return {'stiffness': rows,
+            'stiffness_min_kn_per_mm': min((r['stiffness_kn_per_mm'] for r in rows), default=None),
+            'stiffness_min_ratio_to_bound': min(ratio) if ratio else None,
+            'stiffness_meets_bound': bool(ratio) and min(ratio) >= 1.0}

@@ -5,15 +5,26 @@ from ..params import Param, Schema
 from ..plant.parameters import PLANT_SCHEMA
 
 NODE = Schema('sweep', [
-    Param('sweep.mode', 'str', '', 'stepped', choices=('stepped', 'chirp', 'step')),
+    Param('sweep.mode', 'str', '', 'stepped', choices=('stepped', 'chirp', 'step', 'stiffness'),
+          doc='stiffness: stepped sine of the external load force, reference held at the offset'),
     Param('sweep.amplitude', 'float', 'm', 1e-3, 1e-6, 0.12, doc='sine/chirp amplitude or step size'),
     Param('sweep.offset', 'float', 'm', 0.0, -0.12, 0.12, doc='position the signal is centred on'),
     Param('sweep.start_hz', 'float', 'Hz', 1.0, 0.01, 1000.0, doc='Fr_Test starting_freq'),
     Param('sweep.increment_hz', 'float', 'Hz', 1.0, 1e-3, 1000.0, doc='Fr_Test freq_increment'),
-    Param('sweep.max_hz', 'float', 'Hz', 15.0, 0.01, 1000.0, doc='Fr_Test max_freq'),
+    Param('sweep.max_hz', 'float', 'Hz', 50.0, 0.01, 1000.0,
+          doc='Fr_Test max_freq (at most Nyquist/10)'),
+    Param('sweep.max_accel', 'float', 'm/s^2', 5.0, 0.01, 1000.0,
+          doc='stepped: amplitude lowered to max_accel/(2 pi f)^2 where the sine would '
+              'accelerate more (below the controller\'s reference accel_limit)'),
+    Param('sweep.stop_at_bandwidth', 'bool', '', True,
+          doc='stepped: stop after the first frequency below -3 dB (the bandwidth is bracketed)'),
     Param('sweep.periods', 'int', '', 8, -1000, 10000, doc='Fr_Test period_count'),
     Param('sweep.settle_periods', 'int', '', 2, 0, 100, doc='periods skipped by the analysis'),
     Param('sweep.relax_s', 'float', 's', 0.3, -100.0, 60.0, doc='Fr_Test freq_interval (rest)'),
+    Param('sweep.load_amplitude', 'float', 'N', 5000.0, 1.0, 200000.0,
+          doc='stiffness: load force amplitude on eha/sim/load_force'),
+    Param('sweep.stiffness_freqs', 'float[]', 'Hz', [1.0, 4.0, 7.0], 0.01, 1000.0, min_len=1,
+          doc='stiffness: load frequencies (eq. 4.60 is checked up to 7 Hz)'),
     Param('sweep.chirp_f0', 'float', 'Hz', 0.5, 0.01, 1000.0),
     Param('sweep.chirp_f1', 'float', 'Hz', 20.0, 0.01, 1000.0),
     Param('sweep.chirp_duration', 'float', 's', 30.0, 0.1, 3600.0),
@@ -49,7 +60,14 @@ def build_plan(p: dict):
                     p['sweep.offset'], stroke, Ts, settle_periods=p['sweep.settle_periods'])
         return SteppedSine(p['sweep.start_hz'], p['sweep.increment_hz'], p['sweep.max_hz'],
                            p['sweep.periods'], p['sweep.relax_s'], p['sweep.amplitude'],
-                           p['sweep.offset'], Ts)
+                           p['sweep.offset'], Ts, max_accel=p['sweep.max_accel'])
+    if p['sweep.mode'] == 'stiffness':
+        freqs = list(p['sweep.stiffness_freqs'])
+        check_sweep(min(freqs), 1.0, max(freqs), p['sweep.periods'], p['sweep.relax_s'],
+                    p['sweep.amplitude'], p['sweep.offset'], stroke, Ts,
+                    settle_periods=p['sweep.settle_periods'])
+        return SteppedSine(0.0, 0.0, 0.0, p['sweep.periods'], p['sweep.relax_s'],
+                           p['sweep.load_amplitude'], 0.0, Ts, tuple(freqs))
     if p['sweep.mode'] == 'chirp':
         check_limits(p['sweep.chirp_f1'], p['sweep.amplitude'], p['sweep.offset'], stroke, Ts)
         return Chirp(p['sweep.chirp_f0'], p['sweep.chirp_f1'], p['sweep.chirp_duration'],

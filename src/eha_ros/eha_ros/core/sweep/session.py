@@ -1,8 +1,12 @@
-"""One sweep run against a stream of plant ticks: reference per tick, recording by seq, gain and
-phase per finished frequency, and outputs under out/<run>/ that survive an interruption.
+"""One sweep run against a stream of plant ticks: reference (or load force) per tick, recording
+by seq, gain and phase per finished frequency, and outputs under out/<run>/ that survive an
+interruption.
 
 Used by the sweep node (ticks from /eha/state) and by batch runs (ticks from a loop), so both
-produce the same summary.json (contract: bandwidth_hz, phase_at_7hz_deg, points[]).
+produce the same summary.json (contract: bandwidth_hz, phase_at_7hz_deg, points[]). A stepped
+sine of the reference stops after the first frequency below -3 dB when asked (stop_at_db): the
+bandwidth is then bracketed by the last two points. A stiffness run (excite='load') drives the
+load force with the plan, holds the reference, and reports |F_L|/|x| per frequency (eq. 4.60).
 """
 from __future__ import annotations
 
@@ -13,11 +17,11 @@ import threading
 
 import numpy as np
 
-from ..report import bode_png, write_csv, write_json
-from .analysis import sine_point, summarize
+from ..report import bode_png, stiffness_png, write_csv, write_json
+from .analysis import sine_point, stiffness_kn_per_mm, stiffness_summary, summarize
 
 COLUMNS = ('reference', 'estimate', 'measured', 'truth', 'command', 'motor_speed_0',
-           'motor_speed_1', 'active_channel')
+           'motor_speed_1', 'active_channel', 'load')
 
 
 class Writer:
@@ -55,13 +59,27 @@ class Writer:
 
 
 class SweepSession:
-    """Stepped-sine (or chirp/step) plan + recording + incremental report."""
+    """Stepped-sine (or chirp/step) plan + recording + incremental report.
+
+    excite: 'reference' (the plan is the position reference) or 'load' (the plan is the
+    external load force in N, the reference stays at ``position``). stop_at_db: end a stepped
+    sine after the first point below this gain (None: run every frequency)."""
 
     def __init__(self, plan, out_dir: str, meta: dict, output: str = 'auto',
                  abort_error: float = math.inf, abort_ticks: int = 20, model=None,
-                 background_writes: bool = True, settle_periods: int = 2):
+                 background_writes: bool = True, settle_periods: int = 2,
+                 excite: str = 'reference', position: float = 0.0, stop_at_db=None,
+                 stiffness_bound=None):
+        if excite not in ('reference', 'load'):
+            raise ValueError(f'excite {excite!r}: expected reference or load')
         self.plan = plan
         self.n = plan.n_ticks
+        self.end = self.n                      # ticks that run (an early stop shortens it)
+        self.excite = excite
+        self.position = position if excite == 'load' else plan.offset
+        self.stop_at_db = stop_at_db if excite == 'reference' else None
+        self.stopped_early = False
+        self.stiffness_bound = stiffness_bound  # f_hz -> kN/mm (eq. 4.60), load runs
         self.Ts = plan.Ts
         self.out = out_dir
         os.makedirs(os.path.join(out_dir, 'data'), exist_ok=True)
@@ -87,10 +105,21 @@ class SweepSession:
         """The plan's tick 0 is plant tick seq0."""
         self.seq0 = seq0
 
-    def reference_for(self, seq: int) -> float:
-        """Reference for plant tick seq (offset outside the plan)."""
+    def _plan_at(self, seq: int, rest: float) -> float:
+        if self.seq0 is None:
+            return float(rest)
         i = seq - self.seq0
-        return float(self.ref[i]) if 0 <= i < self.n else float(self.plan.offset)
+        return float(self.ref[i]) if 0 <= i < self.end else float(rest)
+
+    def reference_for(self, seq: int) -> float:
+        """Position reference for plant tick seq (the offset outside the plan)."""
+        if self.excite == 'load':
+            return float(self.position)
+        return self._plan_at(seq, self.plan.offset)
+
+    def load_for(self, seq: int) -> float:
+        """External load force for plant tick seq (0 unless a stiffness run)."""
+        return self._plan_at(seq, 0.0) if self.excite == 'load' else 0.0
 
     def record(self, column: str, seq: int, value: float):
         if self.seq0 is None:
@@ -133,8 +162,31 @@ class SweepSession:
                 new.append(point)
             self.writer.submit(self._write_segment, self.next_segment, seg)
             self.next_segment += 1
+            if (point is not None and self.stop_at_db is not None
+                    and point.gain_db < self.stop_at_db and self.next_segment < len(segs)):
+                # the plan ends where the next sine would start: the reference rests at the
+                # offset (a relax shorter than the analysis lag cuts a started sine short)
+                self.end = segs[self.next_segment].start
+                self.stopped_early = True
             self._write_summary(complete=False, reason='running')
+            if self.stopped_early:
+                break
         return new
+
+    @property
+    def n_run(self) -> int:
+        """Ticks of the run: the plan, or up to the early stop plus the rest after it."""
+        if not self.stopped_early:
+            return self.n
+        return min(self.n, self.end + int(round(getattr(self.plan, 'relax_s', 0.0) / self.Ts)))
+
+    def describe(self, point) -> str:
+        """One progress line per measured frequency ('<f> Hz: ...')."""
+        if self.excite == 'load':
+            return (f'{point.freq_hz:6.2f} Hz: |F|/|x| {stiffness_kn_per_mm(point):7.1f} kN/mm '
+                    f'coherence {point.coherence:.4f}')
+        return (f'{point.freq_hz:6.2f} Hz: {point.gain_db:7.2f} dB {point.phase_deg:7.1f} deg '
+                f'coherence {point.coherence:.4f}')
 
     def output_column(self, sl=slice(None)) -> str:
         if self.output != 'auto':
@@ -145,6 +197,8 @@ class SweepSession:
         sl = slice(seg.start, seg.stop)
         col = self.output_column(sl)
         u, y = self.ref[sl], self.data[col][sl]
+        if self.excite == 'load' and np.isfinite(self.data['load'][sl]).all():
+            u = self.data['load'][sl]              # the force the plant applied (its truth)
         ok = np.isfinite(y)
         if ok.mean() < 0.95:
             return None                            # too much missing: no point, not a wrong one
@@ -162,7 +216,12 @@ class SweepSession:
     def _summary(self, complete: bool, reason: str) -> dict:
         s = summarize(self.points)
         s.update({'complete': complete, 'status': reason, 'output': self.output_column(),
+                  'excite': self.excite, 'stopped_at_bandwidth': self.stopped_early,
                   'frequencies_planned_hz': [seg.freq_hz for seg in getattr(self.plan, 'segments', [])]})
+        if self.excite == 'load':                # x/F in m/N: no bandwidth, no tracking phase
+            s.update(bandwidth_hz=None, phase_at_7hz_deg=None, peak_gain_db=None,
+                     peak_gain_freq_hz=None)
+            s.update(stiffness_summary(self.points, self.stiffness_bound))
         s.update(self.meta)
         return s
 
@@ -176,6 +235,8 @@ class SweepSession:
         if self.finished:
             return self._summary(self.complete, self.reason)
         segs = getattr(self.plan, 'segments', [])
+        if self.stopped_early:
+            segs = segs[:self.next_segment]
         if complete is None:
             complete = self.aborted is None and len(self.points) == len(segs)
         if reason is None and self.aborted is None and not complete:
@@ -186,7 +247,11 @@ class SweepSession:
         summary = self._write_summary(complete, reason)
         cols = {'tick': np.arange(self.n), **self.data}
         self.writer.submit(write_csv, os.path.join(self.out, 'data.csv'), cols)
-        if self.points:
+        if self.points and self.excite == 'load':
+            self.writer.submit(stiffness_png, os.path.join(self.out, 'stiffness.png'),
+                               summary['stiffness'], f'dynamic stiffness |F_L|/|x| '
+                               f'({summary["output"]}), {"complete" if complete else reason}')
+        elif self.points:
             model = None
             if self.model is not None:
                 f = np.logspace(np.log10(min(p.freq_hz for p in self.points) * 0.8),
@@ -200,8 +265,33 @@ class SweepSession:
         return summary
 
 
+def from_params(p: dict, plan, out: str, meta: dict, model=None, **kw):
+    """The SweepSession of validated sweep parameters (node and batch run alike)."""
+    from .analysis import stiffness_bound
+    load = p['sweep.mode'] == 'stiffness'
+    return SweepSession(plan, out, meta, p['sweep.output'], p['sweep.abort_error'],
+                        p['sweep.abort_ticks'], None if load else model,
+                        settle_periods=p['sweep.settle_periods'],
+                        excite='load' if load else 'reference', position=p['sweep.offset'],
+                        stop_at_db=-3.0 if p['sweep.stop_at_bandwidth'] and
+                        p['sweep.mode'] == 'stepped' else None,
+                        stiffness_bound=stiffness_bound() if load else None, **kw)
+
+
 def print_table(summary: dict, out=print):
     """The summary table scripts/run prints."""
+    if summary.get('excite') == 'load':
+        out(f'{"freq [Hz]":>10} {"|F|/|x| [kN/mm]":>16} {"1/|M| [kN/mm]":>14} {"coherence":>10}')
+        for p, k in zip(summary['points'], summary['stiffness']):
+            b = k.get('bound_kn_per_mm')
+            out(f'{p["freq_hz"]:10.2f} {k["stiffness_kn_per_mm"]:16.1f} '
+                f'{"n/a" if b is None else "%.1f" % b:>14} {p["coherence"]:10.4f}')
+        low, ratio = summary['stiffness_min_kn_per_mm'], summary['stiffness_min_ratio_to_bound']
+        out(f'dynamic stiffness: min {"n/a" if low is None else "%.1f kN/mm" % low}'
+            + ('' if ratio is None else f', {ratio:.2f} x the eq. 4.60 bound 1/|M| '
+               f'({"met" if summary["stiffness_meets_bound"] else "NOT met"})')
+            + f'; {"complete" if summary["complete"] else "INCOMPLETE: " + summary["status"]}')
+        return
     out(f'{"freq [Hz]":>10} {"gain [dB]":>10} {"phase [deg]":>12} {"coherence":>10}')
     for p in summary['points']:
         out(f'{p["freq_hz"]:10.2f} {p["gain_db"]:10.2f} {p["phase_deg"]:12.1f} '

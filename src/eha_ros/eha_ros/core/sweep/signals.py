@@ -21,11 +21,17 @@ class Segment:
     start: int          # tick where the sine starts
     stop: int           # tick after the last sine sample
     relax_start: int    # tick where the relax (zero output) before it starts
+    amplitude: float = 0.0
 
 
 @dataclass
 class SteppedSine:
-    """Fr_Test: start frequency, increment, max frequency, periods per frequency, relax time."""
+    """Fr_Test: start frequency, increment, max frequency, periods per frequency, relax time.
+
+    ``freqs`` (a list) replaces the start/increment/max sequence when given. ``max_accel``
+    lowers the amplitude where A (2 pi f)^2 would exceed it: the sine stays inside the
+    reference acceleration limit of the controller and the drive's current limit, so what is
+    measured is the linear closed loop, not a saturation."""
 
     start_hz: float
     increment_hz: float
@@ -35,12 +41,14 @@ class SteppedSine:
     amplitude: float
     offset: float = 0.0
     Ts: float = 1e-3
+    freqs: tuple = ()
+    max_accel: float = math.inf
     segments: list = field(init=False)
 
     def __post_init__(self):
-        freqs = []
+        freqs = [float(f) for f in self.freqs]
         f = self.start_hz
-        while f <= self.max_hz + 1e-9:          # Fr_Test: next frequency while <= max_freq
+        while not self.freqs and f <= self.max_hz + 1e-9:   # Fr_Test: next while <= max_freq
             freqs.append(round(f, 9))
             f += self.increment_hz
         k = 0
@@ -48,7 +56,8 @@ class SteppedSine:
         for f in freqs:
             relax = int(round(self.relax_s / self.Ts))
             n = int(round(self.periods / f / self.Ts))
-            self.segments.append(Segment(f, k + relax, k + relax + n, k))
+            amp = min(self.amplitude, self.max_accel / (2.0 * math.pi * f) ** 2)
+            self.segments.append(Segment(f, k + relax, k + relax + n, k, amp))
             k += relax + n
         self.n_ticks = k + int(round(self.relax_s / self.Ts))
 
@@ -56,7 +65,7 @@ class SteppedSine:
         """Reference at tick k (the sine restarts at phase 0 for every frequency)."""
         for seg in self.segments:
             if seg.start <= k < seg.stop:
-                return self.offset + self.amplitude * math.sin(
+                return self.offset + seg.amplitude * math.sin(
                     2.0 * math.pi * seg.freq_hz * (k - seg.start) * self.Ts)
         return self.offset
 
@@ -64,7 +73,7 @@ class SteppedSine:
         out = np.full(self.n_ticks, self.offset)
         for seg in self.segments:
             k = np.arange(seg.start, seg.stop)
-            out[k] += self.amplitude * np.sin(2.0 * np.pi * seg.freq_hz * (k - seg.start) * self.Ts)
+            out[k] += seg.amplitude * np.sin(2.0 * np.pi * seg.freq_hz * (k - seg.start) * self.Ts)
         return out
 
     def segment_at(self, k: int):
