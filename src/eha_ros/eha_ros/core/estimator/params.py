@@ -8,6 +8,21 @@ from ..plant.parameters import PLANT_SCHEMA
 BAR = 1.0e5
 E = 'estimator.'
 
+
+
+def _adaptive(name, symbol, adapt_doc, q, q_max, p0, p0_max, rng, lo, hi) -> list:
+    """The four parameters of one adaptive model state (core.estimator.adapt): its switch
+    adapt_<name>, random walk q_<name>, initial variance p0_<name> and projection range."""
+    m = E + 'model.'
+    return [Param(m + f'adapt_{name}', 'bool', '', True, doc=adapt_doc),
+            Param(m + f'q_{name}', 'float', '', q, 0.0, q_max,
+                  doc=f'per-step random-walk variance of {symbol}'),
+            Param(m + f'p0_{name}', 'float', '', p0, 0.0, p0_max,
+                  doc=f'initial variance of {symbol}'),
+            Param(m + f'{name}_range', 'float[]', '', rng, lo, hi, min_len=2,
+                  doc=f'projection range of {symbol} [lo, hi]')]
+
+
 ESTIMATOR = Schema('estimator', [
     Param(E + 'filter', 'str', '', 'model', choices=('model', 'pva'),
           doc='model = eq. 4.35 model-based KF; pva = position-velocity-acceleration KF '
@@ -76,50 +91,22 @@ ESTIMATOR = Schema('estimator', [
     # adaptive model states and projection (chambers structure; core.estimator.adapt).
     # Defaults = config/estimator.yaml = scripts/tune_estimator's values (Table 4.5 + box,
     # sensor model).
-    Param(E + 'model.adapt_leakage', 'bool', '', True,
-          doc='chambers: relative leakage correction lambda as a state (C_p + C_c x (1+lambda); '
-              'every leakage without adapt_external_leakage)'),
-    Param(E + 'model.q_leakage', 'float', '', 6.2362e-09, 0.0, 1e6,
-          doc='per-step random-walk variance of lambda'),
-    Param(E + 'model.p0_leakage', 'float', '', 6.236, 0.0, 1e6, doc='initial variance of lambda'),
-    Param(E + 'model.leakage_range', 'float[]', '', [-0.99, 30.41], -1.0, 1e3, min_len=2,
-          doc='projection range of lambda [lo, hi]'),
+    *_adaptive('leakage', 'lambda', 'chambers: relative leakage correction lambda as a state '
+               '(C_p + C_c x (1+lambda); every leakage without adapt_external_leakage)',
+               6.2362e-09, 1e6, 6.236, 1e6, [-0.99, 30.41], -1.0, 1e3),
     Param(E + 'model.leakage_excitation', 'float', 'Pa', 0.0, 0.0, 1e8,
           doc='lambda is updated only while |p_A - p_B| exceeds this (dead zone)'),
-    Param(E + 'model.adapt_external_leakage', 'bool', '', True,
-          doc='chambers: relative correction epsilon of the per-port leakage C_r as a state '
-              '(C_r x (1+epsilon)); lambda then scales the cross-port C_p + C_c only'),
-    Param(E + 'model.q_external_leakage', 'float', '', 6.2362e-09, 0.0, 1e6,
-          doc='per-step random-walk variance of epsilon'),
-    Param(E + 'model.p0_external_leakage', 'float', '', 6.236, 0.0, 1e6,
-          doc='initial variance of epsilon'),
-    Param(E + 'model.external_leakage_range', 'float[]', '', [-0.99, 36.5], -1.0, 1e3,
-          min_len=2, doc='projection range of epsilon [lo, hi]'),
-    Param(E + 'model.adapt_displacement', 'bool', '', True,
-          doc='chambers: relative displacement correction delta as a state (D_p x (1+delta))'),
-    Param(E + 'model.q_displacement', 'float', '', 0, 0.0, 1.0,
-          doc='per-step random-walk variance of delta'),
-    Param(E + 'model.p0_displacement', 'float', '', 0.003331, 0.0, 1.0,
-          doc='initial variance of delta'),
-    Param(E + 'model.displacement_range', 'float[]', '', [-0.325, 0.125], -0.9, 1.0, min_len=2,
-          doc='projection range of delta [lo, hi]'),
-    Param(E + 'model.adapt_compliance', 'bool', '', True,
-          doc='chambers: relative compliance correction kappa as a state (V_d/beta x (1+kappa))'),
-    Param(E + 'model.q_compliance', 'float', '', 4.2185e-11, 0.0, 1.0,
-          doc='per-step random-walk variance of kappa'),
-    Param(E + 'model.p0_compliance', 'float', '', 0.04218, 0.0, 10.0,
-          doc='initial variance of kappa'),
-    Param(E + 'model.compliance_range', 'float[]', '', [-0.5833, 0.9167], -0.9, 10.0, min_len=2,
-          doc='projection range of kappa [lo, hi]'),
-    Param(E + 'model.adapt_friction', 'bool', '', True,
-          doc='chambers with stribeck friction: relative friction correction phi as a state '
-              '(F_c, F_s x (1+phi))'),
-    Param(E + 'model.q_friction', 'float', '', 0.0, 0.0, 1.0,
-          doc='per-step random-walk variance of phi'),
-    Param(E + 'model.p0_friction', 'float', '', 0.1818, 0.0, 10.0,
-          doc='initial variance of phi'),
-    Param(E + 'model.friction_range', 'float[]', '', [-0.875, 1.375], -0.99, 10.0, min_len=2,
-          doc='projection range of phi [lo, hi]'),
+    *_adaptive('external_leakage', 'epsilon', 'chambers: relative correction epsilon of the '
+               'per-port leakage C_r as a state (C_r x (1+epsilon)); lambda then scales the '
+               'cross-port C_p + C_c only', 6.2362e-09, 1e6, 6.236, 1e6, [-0.99, 36.5], -1.0, 1e3),
+    *_adaptive('displacement', 'delta', 'chambers: relative displacement correction delta as a '
+               'state (D_p x (1+delta))', 0, 1.0, 0.003331, 1.0, [-0.325, 0.125], -0.9, 1.0),
+    *_adaptive('compliance', 'kappa', 'chambers: relative compliance correction kappa as a state '
+               '(V_d/beta x (1+kappa))', 4.2185e-11, 1.0, 0.04218, 10.0, [-0.5833, 0.9167],
+               -0.9, 10.0),
+    *_adaptive('friction', 'phi', 'chambers with stribeck friction: relative friction correction '
+               'phi as a state (F_c, F_s x (1+phi))', 0.0, 1.0, 0.1818, 10.0, [-0.875, 1.375],
+               -0.99, 10.0),
     Param(E + 'model.adapt_gate', 'float', '', 4.0, 0.0, 1e6,
           doc='no update of the adaptive states from a sample whose |position innovation| / '
               'sqrt(S) exceeds this (0: always): a fast transient the model cannot explain '
