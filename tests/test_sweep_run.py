@@ -107,6 +107,23 @@ def test_sweep_stops_after_the_first_point_below_3db(tmp_path):
     assert s.reference_for(100 + stop + 5) == 2e-3
 
 
+def test_no_point_is_analysed_after_the_stop(tmp_path):
+    # sines shorter than the rest after the stop (4 periods at 40 Hz = 0.1 s, relax 0.02 s):
+    # the stopped plan's flat reference must not be analysed as the next frequencies
+    plan = SteppedSine(30, 10, 50, 4, 0.02, 1e-4)
+    s = SweepSession(plan, str(tmp_path), {}, background_writes=False, stop_at_db=-3.0)
+    s.start(0)
+    for k in range(plan.n_ticks):                               # keeps calling progress
+        r = s.reference_for(k)
+        s.record('reference', k, r)
+        s.record('truth', k, 0.5 * r)
+        s.progress(k)
+    summary = s.finish()
+    assert [p['freq_hz'] for p in summary['points']] == [30.0]
+    assert summary['points'][0]['gain_db'] == pytest.approx(-6.02, abs=0.01)
+    assert summary['complete'] and summary['stopped_at_bandwidth']
+
+
 def test_stepped_sine_stays_below_max_accel():
     plan = SteppedSine(1, 1, 50, 4, 0.1, 1e-3, max_accel=5.0)
     for seg in plan.segments:

@@ -8,6 +8,9 @@ from dataclasses import dataclass, asdict
 import numpy as np
 
 
+BANDWIDTH_DB = -3.0       # the closed-loop bandwidth: the first frequency below this gain
+
+
 @dataclass
 class Point:
     freq_hz: float
@@ -65,7 +68,7 @@ def chirp_h1(u: np.ndarray, y: np.ndarray, Ts: float, nperseg: int = 4096):
     return f, Puy / np.where(Puu > 0, Puu, np.nan), coh
 
 
-def bandwidth_hz(freqs, gains_db, level_db: float = -3.0):
+def bandwidth_hz(freqs, gains_db, level_db: float = BANDWIDTH_DB):
     """First frequency where the gain falls below level_db (log-interpolated); None if never."""
     freqs, gains = np.asarray(freqs, float), np.asarray(gains_db, float)
     below = np.nonzero(gains < level_db)[0]

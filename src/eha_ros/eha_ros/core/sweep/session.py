@@ -18,7 +18,8 @@ import threading
 import numpy as np
 
 from ..report import bode_png, stiffness_png, write_csv, write_json
-from .analysis import sine_point, stiffness_kn_per_mm, stiffness_summary, summarize
+from .analysis import (BANDWIDTH_DB, sine_point, stiffness_kn_per_mm, stiffness_summary,
+                       summarize)
 
 COLUMNS = ('reference', 'estimate', 'measured', 'truth', 'command', 'motor_speed_0',
            'motor_speed_1', 'active_channel', 'load')
@@ -78,7 +79,6 @@ class SweepSession:
         self.excite = excite
         self.position = position if excite == 'load' else plan.offset
         self.stop_at_db = stop_at_db if excite == 'reference' else None
-        self.stopped_early = False
         self.stiffness_bound = stiffness_bound  # f_hz -> kN/mm (eq. 4.60), load runs
         self.Ts = plan.Ts
         self.out = out_dir
@@ -154,7 +154,7 @@ class SweepSession:
         new = []
         segs = getattr(self.plan, 'segments', [])
         while self.next_segment < len(segs) and self.seq0 is not None and \
-                done_seq - self.seq0 >= segs[self.next_segment].stop:
+                not self.stopped_early and done_seq - self.seq0 >= segs[self.next_segment].stop:
             seg = segs[self.next_segment]
             point = self._analyse(seg)
             if point is not None:
@@ -167,11 +167,13 @@ class SweepSession:
                 # the plan ends where the next sine would start: the reference rests at the
                 # offset (a relax shorter than the analysis lag cuts a started sine short)
                 self.end = segs[self.next_segment].start
-                self.stopped_early = True
             self._write_summary(complete=False, reason='running')
-            if self.stopped_early:
-                break
         return new
+
+    @property
+    def stopped_early(self) -> bool:
+        """The plan was cut short at the bandwidth (stop_at_db)."""
+        return self.end < self.n
 
     @property
     def n_run(self) -> int:
@@ -273,7 +275,7 @@ def from_params(p: dict, plan, out: str, meta: dict, model=None, **kw):
                         p['sweep.abort_ticks'], None if load else model,
                         settle_periods=p['sweep.settle_periods'],
                         excite='load' if load else 'reference', position=p['sweep.offset'],
-                        stop_at_db=-3.0 if p['sweep.stop_at_bandwidth'] and
+                        stop_at_db=BANDWIDTH_DB if p['sweep.stop_at_bandwidth'] and
                         p['sweep.mode'] == 'stepped' else None,
                         stiffness_bound=stiffness_bound() if load else None, **kw)
 
