@@ -206,7 +206,7 @@ def test_lockstep_runs_with_same_seed_record_identically(ros_node, tmp_path):
                 assert seqs[0] < 50, f'{topic}: recording starts at tick {seqs[0]}'
         common = sorted(set(pa[topic]) & set(pb[topic]))
         # estimate and command start when DDS has matched their publishers to the recorder,
-        # which nothing gates (README): seen on the loaded CI machine from tick 304, and once
+        # which nothing gates (docs/nodes/recorder.md): seen on the loaded CI machine from tick 304, and once
         # from 1421 of 3100; 1000 common ticks still hold the second reference step
         assert len(common) >= (ticks - 50 if topic in PLANT_OWN else 1000), \
             (topic, len(common), common[:1])

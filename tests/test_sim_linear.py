@@ -43,7 +43,7 @@ def test_tracking_near_unity_at_1hz(grid):
 
 def test_stiffness_matches_qft_report(grid):
     """Min stiffness up to 7 Hz of config/controller.yaml (the stiff QFT design) on the leakiest
-    plants: ~54 kN/mm, above the 49 kN/mm of eq. 4.60 (README, Controller design)."""
+    plants: ~54 kN/mm, above the 49 kN/mm of eq. 4.60 (docs/design.md, Controller design)."""
     scales, plant, ctl, pred, _ = grid
     k7 = pred['lin_stiffness_kn_per_mm_7hz']
     leaky = scales[:, 0] == scales[:, 0].max()
@@ -128,7 +128,7 @@ def test_bounds():
 
 
 def test_delay_costs_stiffness(grid):
-    """The 2.5 ms loop delay (1.5 Ts + drive delay) is what makes eq. 4.60 hard (README):
+    """The 2.5 ms loop delay (1.5 Ts + drive delay) is what makes eq. 4.60 hard (docs/design.md):
     without it the leakiest plant is stiffer at 7 Hz (a little, with this G)."""
     _, plant, ctl, _, _ = grid
     from eha_ros.core.qft.spec import QftSpec

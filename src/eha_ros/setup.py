@@ -3,7 +3,7 @@ from setuptools import find_packages, setup
 
 PACKAGE = 'eha_ros'
 NODES = ['plant_sim', 'hardware_bridge', 'estimator', 'controller', 'switch_manager', 'sweep',
-         'recorder', 'eha_loop']
+         'recorder', 'eha_loop', 'live']
 
 setup(
     name=PACKAGE,

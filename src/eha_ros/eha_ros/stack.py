@@ -63,11 +63,13 @@ class Stack:
     composed=True runs the loop nodes among ``nodes`` (LOOP_NODES) as one eha_loop process
     (in-process topics between them; real time only), listed as 'eha_loop' in procs.
     ``record='path.mcap'`` adds the recorder (every /eha topic and /diagnostics): it starts
-    first and stops last, after the other nodes have exited, so their last messages are in."""
+    first and stops last, after the other nodes have exited, so their last messages are in.
+    ``live=PORT`` adds the live node (the same topics over the Foxglove WebSocket protocol on
+    that port, 0: any free one)."""
 
     def __init__(self, nodes, config_dir=None, extra=None, log_dir=None, env=None,
                  lockstep: bool = False, composed: bool = False, record: str | None = None,
-                 ads_peer: bool = False):
+                 ads_peer: bool = False, live: int | None = None):
         if composed and lockstep:
             raise ValueError('lock-step runs every node as its own process')
         self.nodes = list(nodes)
@@ -75,6 +77,7 @@ class Stack:
         self.lockstep = lockstep
         self.composed = [n for n in self.nodes if n in LOOP_NODES] if composed else []
         self.record = record
+        self.live = live
         self.config_dir = config_dir
         self.extra = {k: list(v) for k, v in (extra or {}).items()}
         if lockstep:           # the plant steps per command and publishes /clock; others follow it
@@ -90,6 +93,10 @@ class Stack:
         if record:
             self.extra.setdefault('recorder', [])
             self.extra['recorder'] += ['-p', f'recorder:recorder.output:={record}']
+        if live is not None:
+            self.extra.setdefault('live', [])
+            self.extra['live'] += ['-p', f'live:live.port:={int(live)}'] + \
+                (['-p', 'use_sim_time:=true'] if lockstep else [])
         self.log_dir = log_dir
         self.env = dict(os.environ, **(env or {}))
         self.env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -106,6 +113,8 @@ class Stack:
         if self.record and 'recorder' not in self.nodes:
             cmds['recorder'] = node_command('recorder', self.config_dir,
                                             self.extra.get('recorder', ()))
+        if self.live is not None and 'live' not in self.nodes:
+            cmds['live'] = node_command('live', self.config_dir, self.extra.get('live', ()))
         if self.composed:
             cmds['eha_loop'] = composed_command(self.composed, self.config_dir, self.extra)
         for name in self.nodes:

@@ -19,7 +19,7 @@ from eha_ros.tools.run_stack import launch_entries
 
 ARGS = {'plant': ('sim', 'sim: plant_sim | bridge: hardware_bridge to the drive'),
         'mode': ('realtime', 'realtime | lockstep'),
-        'structure': ('auto', 'auto | composed | processes (see README, real time at 1 kHz)'),
+        'structure': ('auto', 'auto | composed | processes (see docs/nodes/eha_loop.md)'),
         'peer': ('true', 'bridge: start the ADS test peer (false: a real PLC answers)'),
         'sweep': ('false', 'also run the sweep node'),
         'config_dir': (os.environ.get('EHA_CONFIG_DIR', default_config_dir()),

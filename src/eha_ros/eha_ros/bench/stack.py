@@ -18,20 +18,27 @@ GOALS = {'answered_fraction': 0.999, 'latency_p99_s': 1e-3, 'cpu_total_cores': 1
 
 
 def measure_stack(duration: float, lockstep: bool = False, composed: bool = False,
-                  warmup: float = 3.0, log_dir=None) -> dict:
-    """Start the stack, wait for the loop to run, measure over ``duration`` s."""
+                  warmup: float = 3.0, log_dir=None, live: bool = False) -> dict:
+    """Start the stack, wait for the loop to run, measure over ``duration`` s. ``live``: with
+    the live node and one WebSocket client subscribed to every channel (bench live)."""
     from ..monitor import CpuMeter, DiagMonitor
     from ..stack import Stack
     monitor = DiagMonitor('bench_stack')
-    stack = Stack(NODES, lockstep=lockstep, composed=composed, log_dir=log_dir).start()
+    port = _free_port() if live else None
+    stack = Stack(NODES, lockstep=lockstep, composed=composed, log_dir=log_dir,
+                  live=port).start()
+    viewer = None
     try:
         end = time.monotonic() + 90
         while monitor.find('plant_sim: loop').get('ticks', 0) < 100:
             if time.monotonic() > end or stack.dead():
                 raise RuntimeError(f'the loop did not start within 90 s (exited: {stack.dead()})')
             time.sleep(0.1)
+        if live:
+            viewer = _Viewer(port)
         time.sleep(warmup)
         d0, t0 = monitor.next_after('plant_sim: loop', time.monotonic())
+        m0 = viewer.total() if viewer else 0
         cpu = CpuMeter(stack.procs)
         cpu.start()
         time.sleep(duration)
@@ -39,7 +46,11 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
         d1, t1 = monitor.next_after('plant_sim: loop', t0 + duration - 0.5)
         wall = t1 - t0                   # between the two diagnostics the figures come from
         snap = monitor.snapshot()
+        if viewer:
+            n0 = viewer.total()
     finally:
+        if viewer:
+            viewer.close()
         stack.stop()
         monitor.close()
     ticks = d1.get('ticks', 0) - d0.get('ticks', 0)
@@ -53,12 +64,52 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
            'overruns': d1.get('overruns', 0) - d0.get('overruns', 0),
            'cpu_total_cores': sum(share.values())}
     out.update({f'cpu_{n}_cores': c for n, c in share.items()})
+    if viewer:
+        out['viewer_channels'] = len(viewer.client.subs)
+        out['viewer_messages_per_s'] = (n0 - m0) / wall
     for name, values in snap.items():
         node = name.split(':')[0]
         for key in ('exec_mean_s', 'exec_p99_s'):
             if key in values:
                 out[f'{node}_{key}'] = values[key]
     return out
+
+
+def _free_port() -> int:
+    import socket
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+class _Viewer:
+    """One WebSocket client subscribed to every advertised channel at full rate, reading in a
+    thread (counts only)."""
+
+    def __init__(self, port: int):
+        import threading
+        from ..tools.ws_client import FoxgloveClient
+        self.client = c = FoxgloveClient(f'ws://127.0.0.1:{port}', timeout=60)
+        c.keep = False
+        c.wait_for(lambda: {'/eha/state', '/eha/estimate', '/eha/command'} <= set(c.channels),
+                   60, 'the loop topics advertised')
+        c.poll(1.0)                      # the rest of the topics
+        c.subscribe(sorted(c.channels))
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while not self.stop.is_set():
+            self.client.poll(0.2)
+
+    def total(self) -> int:
+        return sum(self.client.counts.values())
+
+    def close(self):
+        self.stop.set()
+        self.thread.join(timeout=5)
+        self.client.close()
 
 
 def run(args) -> dict:

@@ -24,6 +24,7 @@ NODE_FILES = {
     'sweep': ['plant.yaml', 'sweep.yaml'],
     'hardware_bridge': ['plant.yaml', 'hardware_bridge.yaml'],
     'recorder': ['recorder.yaml'],
+    'live': ['live.yaml'],
 }
 
 

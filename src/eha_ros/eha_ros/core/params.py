@@ -154,7 +154,7 @@ class Schema:
 def _near(key: str, names: Iterable[str]) -> str:
     import difflib
     close = difflib.get_close_matches(key, list(names), n=2, cutoff=0.6)
-    return 'did you mean ' + ' or '.join(close) + '?' if close else 'see config/README'
+    return 'did you mean ' + ' or '.join(close) + '?' if close else 'see docs/parameters.md'
 
 
 def flatten(tree: Mapping, prefix: str = '') -> dict:

@@ -13,6 +13,7 @@ _REGISTRY = {
     'switch_manager': ('eha_ros.core.redundancy.params', 'SCHEMA'),
     'sweep': ('eha_ros.core.sweep.params', 'SCHEMA'),
     'recorder': ('eha_ros.core.recorder_params', 'SCHEMA'),
+    'live': ('eha_ros.core.live_params', 'SCHEMA'),
     'hardware_bridge': ('eha_ros.core.bridge.params', 'SCHEMA'),
 }
 

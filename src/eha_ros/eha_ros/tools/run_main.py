@@ -3,7 +3,7 @@
 lockstep (default): plant_sim, estimator, controller and switch_manager as separate processes
 over DDS, the plant stepping when command(k) has arrived, the sweep node driving them;
 realtime: on the wall clock at 1 kHz, the loop nodes composed in one eha_loop process (as
-scripts/run_stack runs them; README "Real time at 1 kHz"); batch: the same core objects in one
+scripts/run_stack runs them; docs/nodes/eha_loop.md); batch: the same core objects in one
 process.
 Every mode writes out/<run>/summary.json, data.csv, bode.png (and logs/ for the node modes).
 """

@@ -2,7 +2,7 @@
 
 Real time (default): the 1 kHz loop nodes (plant_sim or hardware_bridge, estimator,
 controller, switch_manager) run composed in one eha_loop process (in-process topics; see
-README "Running the whole stack" for the measurements behind this), every other node in its own
+docs/nodes/eha_loop.md for the measurements behind this), every other node in its own
 process. --structure processes runs each loop node as its own process as well. Lock-step:
 every node its own process, the plant steps when command(k) has arrived.
 One folder per run: out/stack/<run>/ with logs/<process>.log and stack.json (commands, exit
@@ -44,6 +44,12 @@ def parse(argv):
                     help='also run the sweep node (config/sweep.yaml); stop when it finishes')
     ap.add_argument('--record', action='store_true',
                     help='record every /eha topic to out/stack/<run>/recording.mcap')
+    ap.add_argument('--live', action='store_true',
+                    help='serve every /eha topic and /diagnostics over the Foxglove WebSocket '
+                         'protocol (live node, config/live.yaml): open ws://localhost:PORT in '
+                         'Foxglove or Lichtblick, layout config/foxglove/eha_layout.json')
+    ap.add_argument('--live-port', type=int, default=None, metavar='PORT',
+                    help='port of --live (default 8765, from config/live.yaml); implies --live')
     ap.add_argument('--no-peer', action='store_true',
                     help='--plant bridge: do not start the ADS test peer (a real PLC answers at '
                          'ads.host/ads.tcp_port); arming is then explicit: /eha/bridge/arm')
@@ -84,6 +90,8 @@ def plan(args) -> dict:
             raise UsageError(f'-p {item!r}: node {node!r} is not in this stack '
                              f'({", ".join(nodes)})')
         extra.setdefault(node, []).extend(['-p', item])
+    if args.live_port is not None and not 0 <= args.live_port <= 65535:
+        raise UsageError(f'--live-port {args.live_port}: expected 0..65535')
     if args.no_peer and args.plant != 'bridge':
         raise UsageError('--no-peer only applies to --plant bridge')
     peer = args.plant == 'bridge' and not args.no_peer
@@ -103,7 +111,18 @@ def build_stack(args, p: dict, out: str | None = None):
                  log_dir=os.path.join(out, 'logs') if out else None,
                  lockstep=args.mode == 'lockstep', composed=p['structure'] == 'composed',
                  record=os.path.join(out, 'recording.mcap') if args.record and out else None,
-                 ads_peer=p['peer'])
+                 ads_peer=p['peer'], live=live_port(args))
+
+
+def live_port(args) -> int | None:
+    """--live / --live-port -> the live node's port (None: no live node)."""
+    if args.live_port is not None:
+        return args.live_port
+    if not args.live:
+        return None
+    from ..core.batch import node_params
+    from ..core.live_params import SCHEMA
+    return node_params('live', SCHEMA, args.config)['live.port']
 
 
 def launch_entries(argv) -> list[tuple[str, str, list[str]]]:
@@ -162,6 +181,10 @@ def run(args) -> int:
     stack.start()
     print(f'run_stack: {args.mode}, {p["structure"]}: started '
           f'{", ".join(stack.procs)} (logs in {logs}/)', flush=True)
+    if stack.live is not None:
+        print(f'run_stack: live view on ws://localhost:{stack.live} (Foxglove/Lichtblick: open '
+              f'connection, Foxglove WebSocket; layout config/foxglove/eha_layout.json)',
+              flush=True)
     cpu = CpuMeter(stack.procs)
     t_start = time.monotonic()
     reason = 'duration'

@@ -1,0 +1,34 @@
+"""Parameters of the live node (live.*): what is served over the Foxglove WebSocket protocol."""
+from __future__ import annotations
+
+from .params import Param, Schema
+
+SCHEMA = Schema('live', [
+    Param('live.host', 'str', '', '127.0.0.1',
+          doc='address the WebSocket server binds to (0.0.0.0: every interface)'),
+    Param('live.port', 'int', '', 8765, 0, 65535,
+          doc='WebSocket port (foxglove.websocket.v1; 0: any free port, logged)'),
+    Param('live.namespace', 'str', '', '/eha', doc='every topic under this namespace is served'),
+    Param('live.diagnostics', 'bool', '', True, doc='also serve /diagnostics'),
+    Param('live.extra_topics', 'str[]', '', [''], min_len=1,
+          doc='further topics to serve by exact name (e.g. /clock); empty string = none'),
+    Param('live.decimation', 'str[]', '', [''], min_len=1,
+          doc="per-topic decimation 'topic:N' (every N-th message), e.g. "
+              "'/eha/sim/truth:10'; empty string = every topic at full rate"),
+    Param('live.services', 'bool', '', True,
+          doc='offer the services under the namespace (fault injection, channel switch, arm) '
+              'to the viewer, JSON-encoded'),
+    Param('live.parameters', 'bool', '', True,
+          doc="offer the stack's node parameters to the viewer as 'node:name' "
+              '(get and set through each node\'s rcl_interfaces services)'),
+    Param('live.call_timeout', 'float', 's', 2.0, 0.01, 60.0,
+          doc='a forwarded service call or parameter request fails after this'),
+    Param('live.discovery_period', 'float', 's', 0.5, 0.01, 10.0,
+          doc='look for new topics and services this often (wall time)'),
+    Param('live.depth', 'int', '', 1000, 1, 100000,
+          doc='subscription queue depth (reliable topics): 1 s of a 1 kHz stream'),
+    Param('live.time_period', 'float', 's', 0.02, 0.001, 10.0,
+          doc='sim time (header stamp of the newest message) broadcast to the viewer this '
+              'often, with use_sim_time (lock-step)'),
+    Param('live.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+])
