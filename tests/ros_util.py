@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -73,6 +74,13 @@ def stop_process(proc: subprocess.Popen, timeout: float = 10.0):
 
 def python_module(module: str, *args) -> list:
     return [sys.executable, '-m', module, *args]
+
+
+def free_port() -> int:
+    """A TCP port free on the loopback right now."""
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
 
 
 class Spinner:

@@ -2,7 +2,6 @@
 link-loss latch, staleness), and the ADS link against the plant-backed test peer on loopback
 (sum read/write, lock-step stepping, unknown symbol and wrong type found at the PLC)."""
 import math
-import socket
 
 import pytest
 import yaml
@@ -14,14 +13,9 @@ from eha_ros.core.bridge.safety import Safety, Staleness
 from eha_ros.core.bridge.symbols import ROLES, load_symbol_map
 from eha_ros.core.params import ParamError, default_config_dir
 from eha_ros.core.plant_sim_params import SCHEMA as SIM
+from ros_util import free_port
 
 MAP = f'{default_config_dir()}/ads_symbols.yaml'
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
 
 
 def write_map(tmp_path, edit):

@@ -1,6 +1,6 @@
 """live node: the stack over the Foxglove WebSocket protocol, checked with an independent
-client (tests/foxglove_client.py on `websockets`, subprotocol foxglove.websocket.v1) against a
-simultaneous DDS subscription, by seq."""
+client (eha_ros/tools/ws_client.py on `websockets`, subprotocol foxglove.websocket.v1)
+against a simultaneous DDS subscription, by seq."""
 import os
 import socket
 import subprocess
@@ -9,15 +9,9 @@ import sys
 import pytest
 
 from eha_ros.core.ws_subprotocol import CURRENT, LEGACY, rename_request, rename_response
-from ros_util import wait_for
+from ros_util import free_port, wait_for
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
 
 
 def live_cmd(*params):
@@ -36,7 +30,8 @@ def test_legacy_subprotocol_is_renamed_both_ways():
     out, back = rename_request(req)
     assert back and b'Sec-WebSocket-Protocol: ' + CURRENT + b'\r\n' in out
     assert out.replace(CURRENT, LEGACY) == req
-    ans = b'HTTP/1.1 101 Switching Protocols\r\nsec-websocket-protocol: ' + CURRENT + b'\r\n\r\n'
+    ans = (b'HTTP/1.1 101 Switching Protocols\r\nsec-websocket-protocol: ' + CURRENT +
+           b'\r\n\r\n')
     assert rename_response(ans) == ans.replace(CURRENT, LEGACY)
     # a client that offers the current name (or both) passes unchanged
     for offer in (CURRENT, LEGACY + b', ' + CURRENT):

@@ -38,7 +38,7 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
             viewer = _Viewer(port)
         time.sleep(warmup)
         d0, t0 = monitor.next_after('plant_sim: loop', time.monotonic())
-        m0 = viewer.total() if viewer else 0
+        seen0 = viewer.total() if viewer else 0
         cpu = CpuMeter(stack.procs)
         cpu.start()
         time.sleep(duration)
@@ -47,7 +47,7 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
         wall = t1 - t0                   # between the two diagnostics the figures come from
         snap = monitor.snapshot()
         if viewer:
-            n0 = viewer.total()
+            seen1 = viewer.total()
     finally:
         if viewer:
             viewer.close()
@@ -66,7 +66,7 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
     out.update({f'cpu_{n}_cores': c for n, c in share.items()})
     if viewer:
         out['viewer_channels'] = len(viewer.client.subs)
-        out['viewer_messages_per_s'] = (n0 - m0) / wall
+        out['viewer_messages_per_s'] = (seen1 - seen0) / wall
     for name, values in snap.items():
         node = name.split(':')[0]
         for key in ('exec_mean_s', 'exec_p99_s'):

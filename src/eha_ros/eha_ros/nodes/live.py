@@ -16,6 +16,7 @@ clients and forwarded calls go to /diagnostics.
 """
 from __future__ import annotations
 
+import importlib
 import json
 import sys
 import threading
@@ -90,6 +91,11 @@ def _ros_value(p):
             9: lambda: list(p.string_array_value)}.get(t, lambda: None)()
 
 
+# rcl_interfaces service kind -> the name every node serves it under (~/<name>)
+_PARAM_SERVICES = {'ListParameters': 'list_parameters', 'GetParameters': 'get_parameters',
+                   'SetParameters': 'set_parameters'}
+
+
 def _listener_class():
     import foxglove
 
@@ -129,16 +135,16 @@ def make_node(params: dict):
             self.received = {}           # topic -> messages received
             self.sent = {}               # topic -> messages handed to the server
             self.calls = {'ok': 0, 'failed': 0}
-            self.forwarded = {}           # service name -> ROS client
+            self.forwarded = {}          # service name -> (ROS client, srv class) or None
+            self.param_clients = {}      # (node, srv kind) -> ROS client
             self.viewers = set()
             self.latest_ns = 0
             self.closed = False
-            self.exit_code = 0
-            self.sim_time = self.get_parameter('use_sim_time').value
+            sim_time = self.get_parameter('use_sim_time').value
             caps = [foxglove.Capability.Services]
             if p['live.parameters']:
                 caps.append(foxglove.Capability.Parameters)
-            if self.sim_time:
+            if sim_time:
                 caps.append(foxglove.Capability.Time)
             # the SDK server on a private port, behind the relay that also accepts the
             # protocol's older name (core.ws_subprotocol)
@@ -159,11 +165,11 @@ def make_node(params: dict):
             self.create_timer(p['live.discovery_period'], self.discover, clock=wall)
             self.create_timer(p['live.diagnostics_period'], self.publish_diagnostics,
                               clock=wall)
-            if self.sim_time:
+            if sim_time:
                 self.create_timer(p['live.time_period'], self.broadcast_time, clock=wall)
             self.get_logger().info(
-                f'live: ws://{p["live.host"]}:{self.port} (foxglove.websocket.v1 / foxglove.sdk.v1) '
-                f'serving '
+                f'live: ws://{p["live.host"]}:{self.port} (foxglove.websocket.v1 / '
+                f'foxglove.sdk.v1) serving '
                 f'{self.tap.ns}/*{" + " if extra else ""}{", ".join(sorted(extra))}'
                 + (f', decimated {self.every}' if self.every else ''))
             self.discover()
@@ -208,9 +214,8 @@ def make_node(params: dict):
                 if name in self.forwarded or not self.tap.wanted(name) or \
                         name.startswith(f'/{self.get_name()}/'):
                     continue
-                pkg, kind, srv = (types[0].split('/') + ['', ''])[:3]
+                pkg, _, srv = (types[0].split('/') + ['', ''])[:3]
                 try:
-                    import importlib
                     cls = getattr(importlib.import_module(f'{pkg}.srv'), srv)
                 except (ImportError, AttributeError):
                     self.forwarded[name] = None
@@ -229,10 +234,8 @@ def make_node(params: dict):
 
         @staticmethod
         def _json_schema(name, cls):
-            fields = cls.get_fields_and_field_types()
-            text = '\n'.join(f'{msgdefs._msg_type(t)} {f}' for f, t in fields.items())
             return foxglove.MessageSchema(encoding='json', schema=foxglove.Schema(
-                name=name, encoding='ros2msg', data=text.encode()))
+                name=name, encoding='ros2msg', data=msgdefs.generated_text(cls).encode()))
 
         def _wait(self, future):
             done = threading.Event()
@@ -265,13 +268,10 @@ def make_node(params: dict):
         def _param_client(self, node, kind):
             from rcl_interfaces import srv
             key = (node, kind)
-            cache = self.__dict__.setdefault('_pclients', {})
-            if key not in cache:
-                cache[key] = self.create_client(getattr(srv, kind), f'/{node}/'
-                                                + {'ListParameters': 'list_parameters',
-                                                   'GetParameters': 'get_parameters',
-                                                   'SetParameters': 'set_parameters'}[kind])
-            return cache[key]
+            if key not in self.param_clients:
+                self.param_clients[key] = self.create_client(
+                    getattr(srv, kind), f'/{node}/{_PARAM_SERVICES[kind]}')
+            return self.param_clients[key]
 
         def _stack_nodes(self):
             return sorted({n for n, ns in self.get_node_names_and_namespaces()
@@ -336,7 +336,8 @@ def make_node(params: dict):
                       'topics': len(self.channels), 'services': len(
                           [s for s in self.forwarded.values() if s]),
                       'received': sum(self.received.values()), 'sent': sum(self.sent.values()),
-                      'viewers_seen': len(self.viewers), 'calls_ok': self.calls['ok'], 'calls_failed': self.calls['failed'],
+                      'viewers_seen': len(self.viewers), 'calls_ok': self.calls['ok'],
+                      'calls_failed': self.calls['failed'],
                       'finished': final}
             values.update({f'sent {t}': n for t, n in sorted(self.sent.items())})
             diag.publish(self, self.pub_diag, 'websocket', values)

@@ -37,6 +37,7 @@ class FoxgloveClient:
         self.responses = {}          # call id -> (encoding, payload)
         self.texts = []              # other JSON ops (parameterValues, status, ...)
         self.times = []
+        self.next_call = 1
 
     def poll(self, seconds: float):
         end = time.monotonic() + seconds
@@ -94,7 +95,7 @@ class FoxgloveClient:
         self.ws.send(json.dumps({'op': 'unsubscribe', 'subscriptionIds': list(self.subs)}))
 
     def call(self, service: str, request: dict, timeout: float = 10.0):
-        call_id = len(self.responses) + 100 + int(time.monotonic() * 1000) % 100000
+        call_id, self.next_call = self.next_call, self.next_call + 1
         enc = b'json'
         frame = struct.pack('<BIII', SERVICE_CALL_REQUEST, self.services[service]['id'],
                             call_id, len(enc)) + enc + json.dumps(request).encode()
@@ -111,21 +112,21 @@ class FoxgloveClient:
         return json.loads(self.responses[call_id][1])
 
     def get_parameters(self, names, timeout: float = 10.0):
-        rid = f'get{time.monotonic_ns()}'
-        self.ws.send(json.dumps({'op': 'getParameters', 'parameterNames': list(names),
-                                 'id': rid}))
-        found = []
-        self.wait_for(lambda: found.extend(t for t in self.texts if t.get('id') == rid) or found,
-                      timeout, 'parameterValues')
-        return {p['name']: p.get('value') for p in found[0]['parameters']}
+        return self._parameters({'op': 'getParameters', 'parameterNames': list(names)},
+                                timeout)
 
     def set_parameters(self, values: dict, timeout: float = 10.0):
-        rid = f'set{time.monotonic_ns()}'
-        self.ws.send(json.dumps({'op': 'setParameters', 'id': rid, 'parameters': [
-            {'name': k, 'value': v} for k, v in values.items()]}))
+        return self._parameters({'op': 'setParameters', 'parameters': [
+            {'name': k, 'value': v} for k, v in values.items()]}, timeout)
+
+    def _parameters(self, request: dict, timeout: float) -> dict:
+        """Send a parameter request with a fresh id; {name: value} of the parameterValues
+        answer carrying that id."""
+        rid = f'{request["op"]}{time.monotonic_ns()}'
+        self.ws.send(json.dumps(dict(request, id=rid)))
         found = []
         self.wait_for(lambda: found.extend(t for t in self.texts if t.get('id') == rid) or found,
-                      timeout, 'parameterValues after set')
+                      timeout, f'parameterValues for {request["op"]}')
         return {p['name']: p.get('value') for p in found[0]['parameters']}
 
     def close(self):
