@@ -40,6 +40,95 @@ def test_legacy_subprotocol_is_renamed_both_ways():
     assert rename_request(b'GET / HTTP/1.1\r\n\r\n') == (b'GET / HTTP/1.1\r\n\r\n', False)
 
 
+def test_relay_renames_the_handshake_and_copies_every_byte_in_order():
+    """SubprotocolRelay against a plain TCP server standing in for the SDK: the request reaches
+    it with foxglove.sdk.v1, the answer comes back with the legacy name, then 200 kB in
+    irregular pieces cross each way unchanged and in order (batched copies lose nothing)."""
+    import threading
+    from eha_ros.core.ws_subprotocol import SubprotocolRelay
+    srv = socket.create_server(('127.0.0.1', 0))
+    seen = {}
+    payload = bytes(range(256)) * 800
+
+    def server():
+        conn, _ = srv.accept()
+        head = b''
+        while b'\r\n\r\n' not in head:
+            head += conn.recv(4096)
+        seen['head'] = head
+        conn.sendall(b'HTTP/1.1 101 Switching Protocols\r\nSec-WebSocket-Protocol: ' +
+                     CURRENT + b'\r\n\r\n')
+        for i in range(0, len(payload), 777):
+            conn.sendall(payload[i:i + 777])
+        got = b''
+        while len(got) < len(payload):
+            got += conn.recv(65536)
+        seen['up'] = got
+        conn.close()
+    t = threading.Thread(target=server, daemon=True)
+    t.start()
+    relay = SubprotocolRelay('127.0.0.1', 0, srv.getsockname()[1], period=0.002)
+    try:
+        c = socket.create_connection(('127.0.0.1', relay.port), timeout=10)
+        c.sendall(b'GET / HTTP/1.1\r\nSec-WebSocket-Protocol: ' + LEGACY + b'\r\n\r\n')
+        data = b''
+        while len(data) < len(payload) or b'\r\n\r\n' not in data:
+            data += c.recv(65536)
+        answer, _, body = data.partition(b'\r\n\r\n')
+        assert LEGACY in answer and CURRENT not in answer
+        while len(body) < len(payload):
+            body += c.recv(65536)
+        assert body == payload
+        c.sendall(payload)
+        t.join(10)
+        assert CURRENT in seen['head'] and LEGACY not in seen['head']
+        assert seen['up'] == payload
+        c.close()
+    finally:
+        relay.close()
+        srv.close()
+
+
+def test_eha_loop_guest_reads_only_its_own_sections():
+    """live in eha_loop gets the loop's params files, whose /** sections hold the plant
+    parameters: as a guest it takes only what is addressed to it by name."""
+    from eha_ros.core.live_params import SCHEMA
+    from eha_ros.core.params import ParamError, load
+    files = ['config/plant.yaml', 'config/live.yaml']
+    p = load(SCHEMA, files, {'live:live.port': 9, 'plant.sim.Ts': 1e-3}, node='live',
+             wildcards=False)
+    assert p['live.port'] == 9 and p['live.flush_period'] == 0.02
+    with pytest.raises(ParamError, match='unknown parameter'):
+        load(SCHEMA, files, node='live')
+
+
+def test_in_process_subscriber_counts_only_while_it_wants_messages():
+    """compose.LocalPublisher: a co-located callback with eha_wanted() False (live without a
+    viewer) is not a listener, so the plant does not build its truth message for nobody."""
+    from eha_ros.nodes.compose import Bus, LocalPublisher
+
+    class Dds:
+        def get_subscription_count(self):
+            return 0
+    bus = Bus()
+    pub = LocalPublisher(bus, '/eha/sim/truth', Dds(), latched=False)
+    got = []
+    want = [False]
+
+    def live_cb(msg):
+        got.append(msg)
+    live_cb.eha_wanted = lambda: want[0]
+    bus.subscribers['/eha/sim/truth'].append(live_cb)
+    assert pub.get_subscription_count() == 0
+    want[0] = True
+    assert pub.get_subscription_count() == 1
+    bus.subscribers['/eha/sim/truth'].append(got.append)      # a plain subscriber always counts
+    want[0] = False
+    assert pub.get_subscription_count() == 1
+    pub.publish('m')
+    assert got == ['m', 'm']
+
+
 def test_decimation_entries():
     from eha_ros.core.params import ParamError
     from eha_ros.nodes.live import decimation
@@ -77,11 +166,13 @@ def test_port_in_use_is_one_line():
 
 # ---- the whole stack over DDS and WebSocket ----------------------------------------------
 
-def test_live_view_agrees_with_dds_by_seq(ros_node, tmp_path):
-    """Real-time composed stack + live as its own process; the test subscribes over DDS and
-    over the WebSocket at once: every state and estimate both received have the same seq,
-    position and stamp; the truth topic is decimated 1:10; a channel switch requested from
-    the viewer is carried out; parameters read back."""
+@pytest.mark.parametrize('where', ['in_loop', 'own_process'])
+def test_live_view_agrees_with_dds_by_seq(ros_node, tmp_path, where):
+    """Real-time composed stack with live inside eha_loop (run_stack --live: the loop topics
+    taken in-process) or as its own process next to it (the live executable, DDS); the test
+    subscribes over DDS and over the WebSocket at once: every state and estimate both
+    received have the same seq, position and stamp; the truth topic is decimated 1:10; a
+    channel switch requested from the viewer is carried out; parameters read back."""
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rclpy.serialization import deserialize_message
 
@@ -98,8 +189,17 @@ def test_live_view_agrees_with_dds_by_seq(ros_node, tmp_path):
             m.seq, (m.position, m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)), qos)
     ros_node.create_subscription(RedundancyStatus, '/eha/redundancy',
                                  lambda m: redundancy.append(m.active_channel), 10)
-    st = Stack(NODES, composed=True, live=port, log_dir=str(tmp_path / 'logs'),
-               extra={'live': ['-p', "live:live.decimation:=['/eha/sim/truth:10']"]}).start()
+    extra = {'live': ['-p', "live:live.decimation:=['/eha/sim/truth:10']"]}
+    if where == 'in_loop':
+        st = Stack(NODES, composed=True, live=port, log_dir=str(tmp_path / 'logs'),
+                   extra=extra)
+    else:
+        extra['live'] += ['-p', f'live:live.port:={port}']
+        st = Stack(NODES + ['live'], composed=True, log_dir=str(tmp_path / 'logs'),
+                   extra=extra)
+    process = 'eha_loop' if where == 'in_loop' else 'live'
+    assert ('live' in st.commands()) == (where == 'own_process')
+    st.start()
     client = None
     try:
         client = FoxgloveClient(f'ws://127.0.0.1:{port}', timeout=90)
@@ -151,7 +251,7 @@ def test_live_view_agrees_with_dds_by_seq(ros_node, tmp_path):
         if client:
             client.close()
         codes = st.stop()
-    assert codes['live'][0] == 0, codes['live']
+    assert codes[process][0] == 0, codes[process]
 
 
 def test_layout_plots_existing_fields():

@@ -65,7 +65,8 @@ class Stack:
     ``record='path.mcap'`` adds the recorder (every /eha topic and /diagnostics): it starts
     first and stops last, after the other nodes have exited, so their last messages are in.
     ``live=PORT`` adds the live node (the same topics over the Foxglove WebSocket protocol on
-    that port, 0: any free one)."""
+    that port, 0: any free one): composed, inside eha_loop (it takes the loop topics
+    in-process), else as its own process."""
 
     def __init__(self, nodes, config_dir=None, extra=None, log_dir=None, env=None,
                  lockstep: bool = False, composed: bool = False, record: str | None = None,
@@ -76,6 +77,8 @@ class Stack:
         self.ads_peer = ads_peer       # start the ADS test peer (plant behind ADS) for the bridge
         self.lockstep = lockstep
         self.composed = [n for n in self.nodes if n in LOOP_NODES] if composed else []
+        if self.composed and live is not None and 'live' not in self.nodes:
+            self.composed.append('live')
         self.record = record
         self.live = live
         self.config_dir = config_dir
@@ -113,7 +116,7 @@ class Stack:
         if self.record and 'recorder' not in self.nodes:
             cmds['recorder'] = node_command('recorder', self.config_dir,
                                             self.extra.get('recorder', ()))
-        if self.live is not None and 'live' not in self.nodes:
+        if self.live is not None and 'live' not in self.nodes + self.composed:
             cmds['live'] = node_command('live', self.config_dir, self.extra.get('live', ()))
         if self.composed:
             cmds['eha_loop'] = composed_command(self.composed, self.config_dir, self.extra)

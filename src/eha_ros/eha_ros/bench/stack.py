@@ -20,7 +20,8 @@ GOALS = {'answered_fraction': 0.999, 'latency_p99_s': 1e-3, 'cpu_total_cores': 1
 def measure_stack(duration: float, lockstep: bool = False, composed: bool = False,
                   warmup: float = 3.0, log_dir=None, live: bool = False) -> dict:
     """Start the stack, wait for the loop to run, measure over ``duration`` s. ``live``: with
-    the live node and one WebSocket client subscribed to every channel (bench live)."""
+    the live node, first ``duration`` s without a viewer (cpu_*_cores_no_viewer), then with
+    one WebSocket client subscribed to every channel (bench live)."""
     from ..monitor import CpuMeter, DiagMonitor
     from ..stack import Stack
     monitor = DiagMonitor('bench_stack')
@@ -34,7 +35,13 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
             if time.monotonic() > end or stack.dead():
                 raise RuntimeError(f'the loop did not start within 90 s (exited: {stack.dead()})')
             time.sleep(0.1)
+        idle = {}
         if live:
+            time.sleep(warmup)
+            cpu = CpuMeter(stack.procs)
+            cpu.start()
+            time.sleep(duration)
+            idle = cpu.read()
             viewer = _Viewer(port)
         time.sleep(warmup)
         d0, t0 = monitor.next_after('plant_sim: loop', time.monotonic())
@@ -54,16 +61,19 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
         stack.stop()
         monitor.close()
     ticks = d1.get('ticks', 0) - d0.get('ticks', 0)
-    lost = d1.get('commands_not_for_previous_tick', 0) - d0.get('commands_not_for_previous_tick', 0)
+    key = 'commands_not_for_previous_tick'
+    lost = d1.get(key, 0) - d0.get(key, 0)
     out = {'wall_s': wall, 'ticks': ticks, 'lost_ticks': lost,
            'answered_fraction': 1.0 - lost / ticks if ticks else 0.0,
            'ticks_per_wall_s': ticks / wall,
            'latency_p50_s': d1.get('latency_p50_s'), 'latency_p99_s': d1.get('latency_p99_s'),
            'latency_max_s': d1.get('latency_max_s'),
-           'plant_period_p99_s': d1.get('period_p99_s'), 'plant_period_max_s': d1.get('period_max_s'),
+           'plant_period_p99_s': d1.get('period_p99_s'),
+           'plant_period_max_s': d1.get('period_max_s'),
            'overruns': d1.get('overruns', 0) - d0.get('overruns', 0),
            'cpu_total_cores': sum(share.values())}
     out.update({f'cpu_{n}_cores': c for n, c in share.items()})
+    out.update({f'cpu_{n}_cores_no_viewer': c for n, c in idle.items()})
     if viewer:
         out['viewer_channels'] = len(viewer.client.subs)
         out['viewer_messages_per_s'] = (seen1 - seen0) / wall

@@ -23,8 +23,15 @@ SCHEMA = Schema('live', [
               '(get and set through each node\'s rcl_interfaces services)'),
     Param('live.call_timeout', 'float', 's', 2.0, 0.01, 60.0,
           doc='a forwarded service call or parameter request fails after this'),
-    Param('live.discovery_period', 'float', 's', 0.5, 0.01, 10.0,
+    Param('live.discovery_period', 'float', 's', 1.0, 0.01, 10.0,
           doc='look for new topics and services this often (wall time)'),
+    Param('live.flush_period', 'float', 's', 0.02, 0.0, 0.1,
+          doc='messages for the viewer are queued as they arrive and handed to the server '
+              'in one burst this often, by a thread of its own (0: each at once, in the '
+              'receiving thread); a viewer draws at <= 60 Hz'),
+    Param('live.backlog', 'int', '', 10000, 10, 10000000,
+          doc='at most this many messages wait for the next flush; more are dropped and '
+              'counted (dropped on /diagnostics)'),
     Param('live.depth', 'int', '', 1000, 1, 100000,
           doc='subscription queue depth (reliable topics): 1 s of a 1 kHz stream'),
     Param('live.time_period', 'float', 's', 0.02, 0.001, 10.0,

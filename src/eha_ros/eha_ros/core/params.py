@@ -247,12 +247,13 @@ ROS_BUILTINS = ('use_sim_time', 'start_type_description_service')
 
 
 def load(schema: Schema, files: Sequence[str] = (), overrides: Mapping[str, Any] | None = None,
-         node: str | None = None, namespace: str = '/') -> dict:
+         node: str | None = None, namespace: str = '/', wildcards: bool = True) -> dict:
     """Merge params files and overrides with rclpy's precedence, validate, fill defaults.
 
     Within a class later assignments win (files in order, then ``-p``); named assignments
     (the node's own sections, ``-p node:key:=value``) win over wildcard ones (``/**``
-    sections, plain ``-p key:=value``), exactly as rclpy applies them.
+    sections, plain ``-p key:=value``), exactly as rclpy applies them. ``wildcards=False``:
+    named assignments only (a guest node in eha_loop, whose /** sections are the plant's).
     """
     node = node or schema.node
     fqn = fully_qualified(node, namespace)
@@ -261,12 +262,14 @@ def load(schema: Schema, files: Sequence[str] = (), overrides: Mapping[str, Any]
     sources: dict = {}
     for path in files:
         w, n = read_params_sections(path, node, namespace)
-        for target, part in ((wild, w), (named, n)):
+        for target, part in ((wild, w if wildcards else {}), (named, n)):
             for key, value in part.items():
                 target[key] = value
                 sources[(target is named, key)] = path
     for key, value in (overrides or {}).items():
         target, name = wild, key
+        if ':' not in key and not wildcards:
+            continue
         if ':' in key:
             who, _, name = key.partition(':')
             if who not in (node, fqn, fqn.lstrip('/')):

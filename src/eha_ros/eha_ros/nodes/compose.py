@@ -25,6 +25,13 @@ import time
 from collections import defaultdict
 
 
+def unlocked(method):
+    """Mark a timer callback that must not hold up the loop: a composed process runs it without
+    the process-wide lock (it only reads node state, or takes the lock itself where needed)."""
+    method.eha_unlocked = True
+    return method
+
+
 class Bus:
     """Registry of the process's local publishers and subscribers, plus the callback lock."""
 
@@ -35,11 +42,12 @@ class Bus:
         self.subscribers: dict[str, list] = defaultdict(list)     # topic -> callbacks
         self.published: set[str] = set()
         self.deferred: list = []             # DDS subscriptions decided at finalize()
+        self.guests: set[str] = set()        # nodes without the process's global ROS args
         self.final = False
 
     def guard(self, callback):
-        """Run callback under the process lock (not a diag.reader: it only reads)."""
-        if getattr(callback, 'eha_reader', False):
+        """Run callback under the process lock (not an :func:`unlocked` one)."""
+        if getattr(callback, 'eha_unlocked', False):
             return callback
         lock = self.lock
 
@@ -84,8 +92,13 @@ class LocalPublisher:
             self.dds.publish(msg)
 
     def get_subscription_count(self) -> int:
-        """Co-located subscribers + outside ones (the latter looked up every 0.2 s)."""
-        return self.remote_subscribers() + len(self.bus.subscribers.get(self.topic, ()))
+        """Co-located subscribers that want messages now + outside ones (the latter looked up
+        every 0.2 s). A callback's ``eha_wanted()``, where it has one, says whether it wants
+        them (the live view: only while a viewer is subscribed), so a publisher that builds a
+        message only for listeners (the plant's truth) does not build it for nobody."""
+        return self.remote_subscribers() + sum(
+            1 for cb in self.bus.subscribers.get(self.topic, ())
+            if getattr(cb, 'eha_wanted', None) is None or cb.eha_wanted())
 
     def __getattr__(self, name):
         return getattr(self.dds, name)
@@ -98,6 +111,11 @@ def composed_base(bus: Bus):
 
     class ComposedNode(Node):
         callback_lock = bus.lock
+
+        def __init__(self, node_name, *args, **kwargs):
+            if node_name in bus.guests:      # its parameters come from its own sections only
+                kwargs.setdefault('use_global_arguments', False)
+            super().__init__(node_name, *args, **kwargs)
 
         def create_publisher(self, msg_type, topic, qos_profile, **kwargs):
             dds = super().create_publisher(msg_type, topic, qos_profile, **kwargs)
@@ -112,7 +130,8 @@ def composed_base(bus: Bus):
         def create_subscription(self, msg_type, topic, callback, qos_profile, **kwargs):
             name = self.resolve_topic_name(topic)
             guarded = bus.guard(callback)
-            bus.subscribers[name].append(guarded)
+            with bus.lock:          # a callback may subscribe from outside the lock (live)
+                bus.subscribers[name].append(guarded)
             if bus.final:
                 if name not in bus.published:
                     return self.dds_subscription(name, msg_type, guarded, qos_profile, **kwargs)

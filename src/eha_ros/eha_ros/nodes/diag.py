@@ -5,8 +5,8 @@ from __future__ import annotations
 def reader(method):
     """Mark a timer callback that only reads node state (diagnostics): a composed process
     (eha_loop) runs it without the process-wide callback lock, so it never holds up the loop."""
-    method.eha_reader = True
-    return method
+    from .compose import unlocked
+    return unlocked(method)
 
 
 def publisher(node):

@@ -6,7 +6,8 @@ Each node is the same class as its standalone executable, with its own name, par
 (its sections of the params files), services and /diagnostics; the topics between them are
 delivered in-process, in the plant's (or bridge's) loop thread, so state(k) -> estimate(k)
 -> command(k) completes within the tick. Everything else on the graph (sweep, recorder,
-monitors, tests) sees the usual topics over DDS.
+monitors, tests) sees the usual topics over DDS. ``--nodes ...,live`` adds the live view as a
+guest: it takes the loop topics in-process and only its own params sections (no /**).
 """
 from __future__ import annotations
 
@@ -20,6 +21,9 @@ from . import common
 
 COMPOSED_STALE_CHECK = 0.005   # s: estimator.node.timer_period in eha_loop unless given
 LOOP_NODES = ('estimator', 'controller', 'switch_manager')
+# may join the loop's process: the live view then takes the loop topics in-process (the
+# message object, serialized only for a subscribed viewer) instead of a second DDS delivery
+GUESTS = ('live',)
 PLANTS = {'sim': 'plant_sim', 'bridge': 'hardware_bridge'}
 # s: Python's default. Shorter (0.2 ms tried) lets a 1 kHz executor timer preempt the loop
 # thread mid-tick, only to block on the callback lock: two thread switches per timer tick.
@@ -35,14 +39,15 @@ def parse(argv):
     ap.add_argument('--plant', choices=sorted(PLANTS), default='sim',
                     help='plant side: the simulator (plant_sim) or the drive (hardware_bridge)')
     ap.add_argument('--nodes', default=','.join(LOOP_NODES),
-                    help='co-located nodes besides the plant side (default: %(default)s)')
+                    help='co-located nodes besides the plant side (default: %(default)s; '
+                         f'may add {", ".join(GUESTS)})')
     args = ap.parse_args(ours)
     names = [PLANTS[args.plant]] + [n for n in args.nodes.split(',') if n]
-    known = set(PLANTS.values()) | set(LOOP_NODES)
+    known = set(PLANTS.values()) | set(LOOP_NODES) | set(GUESTS)
     for n in names:
         if n not in known:
             raise UsageError(f'--nodes: unknown node {n!r}: expected some of '
-                             f'{", ".join(LOOP_NODES)}')
+                             f'{", ".join(LOOP_NODES + GUESTS)}')
     return names, ros
 
 
@@ -63,7 +68,9 @@ def main(argv=None) -> int:
             overrides = dict(overrides, **{'estimator:estimator.node.timer_period':
                                            COMPOSED_STALE_CHECK})
             ros = ros + ['-p', f'estimator:estimator.node.timer_period:={COMPOSED_STALE_CHECK}']
-        params = {n: load(modules[n].SCHEMA, files, overrides, node=n, namespace=namespace)
+        # a guest takes what is addressed to it by name: the /** sections are the plant's
+        params = {n: load(modules[n].SCHEMA, files, overrides, node=n, namespace=namespace,
+                          wildcards=n not in GUESTS)
                   for n in names}
         if params[names[0]].get('sim_node.lockstep'):
             raise UsageError('lock-step runs each node as its own process '
@@ -73,6 +80,7 @@ def main(argv=None) -> int:
         def make_nodes():
             from .compose import Bus
             bus = Bus()
+            bus.guests.update(n for n in names if n in GUESTS)
             common._BUS = bus
             try:
                 nodes = [modules[n].make_node(params[n]) for n in names]

@@ -3,10 +3,12 @@
 Every topic under /eha (plus /diagnostics) is found as it appears (nodes.tap: raw CDR with the
 publishers' QoS) and served as a channel with message encoding ``cdr`` and a ``ros2msg``
 schema holding the full message definition, the bytes exactly as sent: the Foxglove app,
-Lichtblick and PlotJuggler decode them without the packages. A message is only handed to the
-server while a client is subscribed to its channel (``Channel.has_sinks``); ``live.decimation``
-keeps every N-th message of a topic. log time = the message's header stamp (sim time in
-lock-step, where the newest stamp is also broadcast as the server time), else receive time.
+Lichtblick and PlotJuggler decode them without the packages. Inside eha_loop (run_stack
+--live) the loop's topics arrive in-process as message objects, serialized here. A message is
+only taken while a client is subscribed to its channel (``Channel.has_sinks``), queued, and
+handed to the server in one burst every ``live.flush_period``; ``live.decimation`` keeps every
+N-th message of a topic. log time = the message's header stamp (sim time in lock-step, where
+the newest stamp is also broadcast as the server time), else receive time.
 
 The services under the namespace (/eha/inject_fault, /eha/switch_channel, /eha/bridge/arm, ...)
 are offered to the viewer with JSON requests and responses, each call forwarded to the ROS
@@ -16,6 +18,7 @@ clients and forwarded calls go to /diagnostics.
 """
 from __future__ import annotations
 
+import collections
 import importlib
 import json
 import sys
@@ -27,6 +30,7 @@ from ..core.mcap_sink import stamp_ns
 from ..core.params import ParamError
 from ..core.ws_subprotocol import SubprotocolRelay
 from . import diag, msgdefs
+from .compose import unlocked
 from .common import declare_and_validate, node_base, run
 from .tap import TopicTap
 
@@ -122,6 +126,7 @@ def make_node(params: dict):
     import foxglove
     _Listener = _listener_class()
     from rclpy.clock import Clock, ClockType
+    from rclpy.serialization import serialize_message
 
     class Live(Node):
         def __init__(self):
@@ -140,6 +145,9 @@ def make_node(params: dict):
             self.viewers = set()
             self.latest_ns = 0
             self.closed = False
+            self.queue = collections.deque()   # ((topic, log, stamped), data, receive ns)
+            self.dropped = 0
+            self.flush = p['live.flush_period']
             sim_time = self.get_parameter('use_sim_time').value
             caps = [foxglove.Capability.Services]
             if p['live.parameters']:
@@ -167,6 +175,10 @@ def make_node(params: dict):
                               clock=wall)
             if sim_time:
                 self.create_timer(p['live.time_period'], self.broadcast_time, clock=wall)
+            if self.flush:           # the hand-over in a thread of its own, off the bus lock
+                self.flusher = threading.Thread(target=self.flush_every_period,
+                                                name='live-flush', daemon=True)
+                self.flusher.start()
             self.get_logger().info(
                 f'live: ws://{p["live.host"]}:{self.port} (foxglove.websocket.v1 / '
                 f'foxglove.sdk.v1) serving '
@@ -182,27 +194,65 @@ def make_node(params: dict):
             self.channels[topic] = ch
             self.received[topic] = self.sent[topic] = 0
             every = self.every.get(topic, 1)
-            has_sinks, log, now = ch.has_sinks, ch.log, time.time_ns
-            counts, sent = self.received, self.sent
+            has_sinks, now = ch.has_sinks, time.time_ns
+            counts, queue, at_once = self.received, self.queue, not self.flush
+            backlog = self.p['live.backlog']
+            entry = (topic, ch.log, stamped)
 
+            @unlocked                    # in eha_loop: touches nothing the loop shares
             def on_message(data):
+                """CDR bytes from DDS, or in eha_loop the message object itself (delivered
+                in the publisher's thread, which may reuse it: serialized here): queued
+                with its receive time for the flusher."""
                 n = counts[topic] = counts[topic] + 1
                 if n % every or not has_sinks():
                     return
+                if len(queue) >= backlog:
+                    self.dropped += 1
+                    return
+                if not isinstance(data, bytes):
+                    data = serialize_message(data)
+                queue.append((entry, data, now()))
+                if at_once:
+                    self.flush_queue()
+            on_message.eha_wanted = has_sinks     # eha_loop: nothing built for no viewer
+            return on_message
+
+        def flush_queue(self):
+            """Hand the queued messages to the server. log time = the header stamp, else the
+            receive time."""
+            queue, sent = self.queue, self.sent
+            while queue:
+                (topic, log, stamped), data, t_recv = queue.popleft()
                 t = stamp_ns(data) if stamped else None
                 if t is None or t <= 0:
-                    t = now()
+                    t = t_recv
                 else:
                     self.latest_ns = t
                 log(data, log_time=t)
                 sent[topic] += 1
-            return on_message
 
+        def flush_every_period(self):
+            """The flusher thread: one burst per period, so the server's sender wakes once
+            per burst, not per message (bench live: in the receiving thread, under eha_loop's
+            bus lock, it cost more)."""
+            while not self.closed:
+                time.sleep(self.flush)
+                try:
+                    self.flush_queue()
+                except Exception as err:         # the server stopped under us: say it once
+                    if not self.closed:
+                        self.get_logger().error(f'live: handing messages to the server: '
+                                                f'{err}')
+                    return
+
+        @unlocked                    # graph queries must not hold up a composed loop
         def discover(self):
             self.tap.discover()
             if self.p['live.services']:
                 self.discover_services()
 
+        @diag.reader
         def broadcast_time(self):
             if self.latest_ns:
                 self.server.broadcast_time(self.latest_ns)
@@ -331,11 +381,13 @@ def make_node(params: dict):
             return out
 
         # ---- diagnostics, shutdown
+        @diag.reader
         def publish_diagnostics(self, final: bool = False):
             values = {'url': f'ws://{self.p["live.host"]}:{self.port}',
                       'topics': len(self.channels), 'services': len(
                           [s for s in self.forwarded.values() if s]),
                       'received': sum(self.received.values()), 'sent': sum(self.sent.values()),
+                      'dropped': self.dropped,
                       'viewers_seen': len(self.viewers), 'calls_ok': self.calls['ok'],
                       'calls_failed': self.calls['failed'],
                       'finished': final}
@@ -346,6 +398,12 @@ def make_node(params: dict):
             if self.closed:
                 return
             self.closed = True
+            if self.flush:
+                self.flusher.join(timeout=1.0)
+            try:
+                self.flush_queue()                 # what the last period queued
+            except Exception:
+                pass
             self.relay.close()
             self.server.stop()
             self.get_logger().info(f'live: {sum(self.sent.values())} of '
