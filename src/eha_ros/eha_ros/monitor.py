@@ -105,6 +105,12 @@ class CpuMeter:
         self.t0 = time.monotonic()
         self.c0 = {n: self._cpu(p) for n, p in self.procs.items()}
 
+    def over(self, seconds: float) -> dict:
+        """start(), wait ``seconds``, read()."""
+        self.start()
+        time.sleep(seconds)
+        return self.read()
+
     def read(self) -> dict:
         dt = max(time.monotonic() - self.t0, 1e-9)
         out = {}

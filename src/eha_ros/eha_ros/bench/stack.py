@@ -38,18 +38,12 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
         idle = {}
         if live:
             time.sleep(warmup)
-            cpu = CpuMeter(stack.procs)
-            cpu.start()
-            time.sleep(duration)
-            idle = cpu.read()
+            idle = CpuMeter(stack.procs).over(duration)
             viewer = _Viewer(port)
         time.sleep(warmup)
         d0, t0 = monitor.next_after('plant_sim: loop', time.monotonic())
         seen0 = viewer.total() if viewer else 0
-        cpu = CpuMeter(stack.procs)
-        cpu.start()
-        time.sleep(duration)
-        share = cpu.read()
+        share = CpuMeter(stack.procs).over(duration)
         d1, t1 = monitor.next_after('plant_sim: loop', t0 + duration - 0.5)
         wall = t1 - t0                   # between the two diagnostics the figures come from
         snap = monitor.snapshot()

@@ -268,13 +268,13 @@ def load(schema: Schema, files: Sequence[str] = (), overrides: Mapping[str, Any]
                 sources[(target is named, key)] = path
     for key, value in (overrides or {}).items():
         target, name = wild, key
-        if ':' not in key and not wildcards:
-            continue
         if ':' in key:
             who, _, name = key.partition(':')
             if who not in (node, fqn, fqn.lstrip('/')):
                 continue
             target = named
+        elif not wildcards:
+            continue
         target[name] = value
         sources[(target is named, name)] = 'command line'
     values = {**wild, **named}

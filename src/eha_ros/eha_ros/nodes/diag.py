@@ -1,11 +1,12 @@
 """/diagnostics publishing shared by the nodes."""
 from __future__ import annotations
 
+from .compose import unlocked
+
 
 def reader(method):
     """Mark a timer callback that only reads node state (diagnostics): a composed process
     (eha_loop) runs it without the process-wide callback lock, so it never holds up the loop."""
-    from .compose import unlocked
     return unlocked(method)
 
 
