@@ -50,11 +50,13 @@ def fill(msg, salt: int = 1):
 
 
 def start_process(args, env=None, **kw) -> subprocess.Popen:
-    """Start a node/peer as a separate process in its own process group."""
+    """Start a node/peer as a separate process in its own process group (dying with the
+    test process: stack.spawn)."""
+    from eha_ros.stack import spawn
     full_env = dict(os.environ)
     full_env.update(env or {})
-    return subprocess.Popen(args, env=full_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True, **kw)
+    return spawn(args, env=full_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                 text=True, **kw)
 
 
 def stop_process(proc: subprocess.Popen, timeout: float = 10.0):

@@ -112,6 +112,9 @@ def test_inject_fault_service_of_the_composed_plant(loop, ros_node):
     fut = cli.call_async(InjectFault.Request(fault='no_such_fault'))
     assert wait_for(fut.done, 10)
     assert not fut.result().success
+    fut = cli.call_async(InjectFault.Request(fault='clear'))
+    assert wait_for(fut.done, 10)
+    assert fut.result().success and 'cleared' in fut.result().message, fut.result().message
 
 
 @pytest.mark.parametrize('pre, ros, expect', [

@@ -82,6 +82,8 @@ def test_parse_ros_args():
     ('demo:\n  ros__parameters:\n    gain: {ki: 1.0}\n    count: 2.5\n', ['count', '2.5', 'int']),
     ('demo:\n  ros__parameters:\n    gain: {ki: 1.0}\n    enabled: 1\n', ['enabled', '1', 'bool']),
     ('demo:\n  ros__parameters:\n    gain: {ki: .nan}\n', ['gain.ki', 'nan', 'float']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: 5e-7}\n', ['gain.ki', "'5e-7' is a string in YAML 1.1", '5.0e-7']),
+    ('demo:\n  ros__parameters:\n    gain: {ki: 1.0}\n    num: [1.0, 2e3]\n', ['num', "'2e3' is a string"]),
     ('demo:\n  ros__parameters:\n    gain: {ki: [1.0}\n', ['malformed YAML', 'line 3']),
     ('demo:\n  gain: 1\n', ['section', 'ros__parameters']),
     ('- 1\n- 2\n', ['top level is list']),
@@ -162,3 +164,48 @@ def test_bad_parameter_file_stops_program_with_one_line(tmp_path, case):
     assert lines[0].startswith('check_config: error: ' + path), lines[0]
     for word in words:
         assert word in lines[0], lines[0]
+
+
+CONTROLLER_FILES = [os.path.join(ROOT, 'config', f)
+                    for f in ('plant.yaml', 'controller.yaml', 'controller_node.yaml')]
+G = 'controller:\n  ros__parameters:\n    position_controller:\n      num: {num}\n      den: {den}\n'
+NODE_AND_CHECK_CASES = {      # issue 21 item 8: what the node refuses, check_config refuses
+    'not a params file': ('- 1\n- 2\n', 'top level is list'),
+    'improper G': (G.format(num='[1.0, 2.0, 3.0]', den='[1.0, 2.0]'),
+                   'expected a proper transfer function'),
+    'G den [0, 0]': (G.format(num='[1.0]', den='[0.0, 0.0]'), 'non-zero coefficient'),
+    'G of another order than its anti-windup poles': (G.format(num='[1.0]', den='[1.0, 5.0]'),
+                                                      'poles for a controller of order 1'),
+}
+
+
+@pytest.mark.parametrize('case', sorted(NODE_AND_CHECK_CASES))
+def test_check_config_and_the_node_refuse_the_same_file_with_the_same_line(tmp_path, case):
+    text, words = NODE_AND_CHECK_CASES[case]
+    path = write(tmp_path, text, 'bad.yaml')
+    check = subprocess.run([sys.executable, '-m', 'eha_ros.tools.check_config', '--node',
+                            'controller', *CONTROLLER_FILES, path],
+                           capture_output=True, text=True, timeout=120)
+    node = subprocess.run([os.path.join(os.path.dirname(sys.executable), 'controller'),
+                           '--ros-args'] + [a for f in CONTROLLER_FILES + [path]
+                                            for a in ('--params-file', f)],
+                          capture_output=True, text=True, timeout=120)
+    for res, prog in ((check, 'check_config'), (node, 'controller')):
+        lines = res.stderr.strip().splitlines()
+        assert res.returncode == 2 and len(lines) == 1, (prog, res.returncode, res.stderr)
+        assert lines[0].startswith(f'{prog}: error: ') and words in lines[0], lines[0]
+    assert check.stderr.split(': error: ')[1] == node.stderr.split(': error: ')[1]
+
+
+@pytest.mark.parametrize('args, words', [
+    (['--params-file'], '--params-file at the end without its value'),
+    (['--log-level', 'bogus'], "--log-level 'bogus': expected one of debug"),
+    (['-p'], '-p at the end without its value'),
+])
+def test_malformed_ros_arguments_are_one_line_not_an_rcl_traceback(args, words):
+    res = subprocess.run([os.path.join(os.path.dirname(sys.executable), 'controller'),
+                          '--ros-args'] + [a for f in CONTROLLER_FILES
+                                           for a in ('--params-file', f)] + args,
+                         capture_output=True, text=True, timeout=120)
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(lines) == 1 and words in lines[0], res.stderr

@@ -24,6 +24,25 @@ def test_unknown_and_bad_faults_rejected():
     assert not plant.inject_fault('msp_bias', 0, math.nan, 0.0)[0]
     assert not plant.inject_fault('msp_bias', 0, 1e-3, -1.0)[0]
     assert not plant.inject_fault('pump_leakage', 0, -2.0, 0.0)[0]
+    ok, msg = plant.inject_fault('msp_bias', 0, 1e9, 0.0)     # beyond the sensor's range
+    assert not ok and 'sensor range' in msg and not plant.faults.active
+    assert not plant.inject_fault('msp_drift', 0, -1e3, 0.0)[0]
+
+
+def test_clear_removes_permanent_faults():
+    plant = _quiet()
+    _run(plant, 10)
+    assert plant.inject_fault('msp_bias', 0, 1e-3, 0.0)[0]      # permanent
+    assert plant.inject_fault('pressure_sensor', 0, 1e5, 0.0)[0]
+    _run(plant, 5)
+    assert plant.measure().position - plant.truth().position == pytest.approx(1e-3, abs=1.5e-6)
+    ok, msg = plant.inject_fault('clear', 0, 0.0, 0.0)
+    assert ok and 'cleared 2' in msg
+    _run(plant, 2)
+    m, tr = plant.measure(), plant.truth()
+    assert abs(m.position - tr.position) < 1.5e-6
+    assert abs(m.pressure_a - tr.pressure_a) < 1e3
+    assert plant.inject_fault('clear', 0, 0.0, 0.0) == (True, 'cleared 0 active fault(s)')
 
 
 def test_msp_bias_shifts_measured_position_and_expires():

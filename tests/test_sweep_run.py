@@ -55,6 +55,9 @@ def test_main_job_batch_mode(tmp_path):
     (['--max-hz', '80'], 'above Nyquist/10'),
     (['--amplitude-mm', '70'], 'beyond the stroke'),
     (['--periods', '-3'], 'periods -3'),
+    (['--name', '../x'], 'expected a plain folder name'),
+    (['--name', 'a/b'], 'expected a plain folder name'),
+    (['--timeout', 'nan'], '--timeout nan'),
 ])
 def test_bad_sweep_options_one_line(args, words, tmp_path):
     res = subprocess.run([RUN, '--mode', 'batch', '--out', str(tmp_path)] + args,
@@ -63,6 +66,19 @@ def test_bad_sweep_options_one_line(args, words, tmp_path):
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and words in lines[0] and 'Traceback' not in res.stderr, res.stderr
     assert not os.listdir(tmp_path), 'nothing is written for a refused sweep'
+
+
+def test_a_finished_run_is_never_overwritten(tmp_path):
+    """--name of a folder holding a finished run (summary.json of scripts/run, stack.json of
+    run_stack) gets a new folder beside it; an unfinished one is reused."""
+    from eha_ros.core.report import run_dir
+    for marker in ('summary.json', 'stack.json'):
+        base = tmp_path / marker
+        (base / 'r').mkdir(parents=True)
+        (base / 'r' / marker).write_text('{}')
+        assert run_dir(str(base), 'r') == str(base / 'r-1')
+        assert (base / 'r' / marker).read_text() == '{}'
+    assert run_dir(str(tmp_path), 'fresh') == run_dir(str(tmp_path), 'fresh')
 
 
 def feed(session, plan, system, load=False):

@@ -4,10 +4,16 @@ Used by scripts/run_stack (progress lines, stack.json) and scripts/bench stack.
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 
+from .core.cli import UsageError
 from .stack import cpu_seconds
+
+ERROR = 2                       # diagnostic_msgs/DiagnosticStatus ERROR (3: STALE)
+PLANT_TOPIC = '/eha/state'      # published by exactly one plant side per stack
+DISCOVERY_WAIT = 2.0            # [s] to see the publishers already on the domain
 
 
 def parse_value(text: str):
@@ -27,13 +33,16 @@ class DiagMonitor:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
         self._own_context = not rclpy.ok()
-        if self._own_context:
-            rclpy.init()
+        if self._own_context:        # signals stay the program's (cli.interrupt_on_signals):
+            rclpy.init(signal_handler_options=SignalHandlerOptions.NO)   # rclpy's would end
+            # this context on SIGTERM and leave the program running without its monitor
         self.node = rclpy.create_node(name)
         self.latest: dict[str, dict] = {}
         self.levels: dict[str, int] = {}
         self.arrival: dict[str, float] = {}          # monotonic time of the latest per name
+        self.errors: dict[str, tuple[float, str]] = {}   # first ERROR/STALE per name: (t, message)
         self.lock = threading.Lock()
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 100)
         self.executor = SingleThreadedExecutor()
@@ -46,12 +55,22 @@ class DiagMonitor:
         with self.lock:
             for s in msg.status:
                 self.latest[s.name] = {v.key: parse_value(v.value) for v in s.values}
-                self.levels[s.name] = s.level[0] if isinstance(s.level, bytes) else int(s.level)
-                self.arrival[s.name] = time.monotonic()
+                level = s.level[0] if isinstance(s.level, bytes) else int(s.level)
+                self.levels[s.name] = level
+                self.arrival[s.name] = now = time.monotonic()
+                if level >= ERROR and s.name not in self.errors:
+                    self.errors[s.name] = (now, s.message)
 
     def _spin(self):
         while not self._stop.is_set():
             self.executor.spin_once(timeout_sec=0.1)
+
+    def new_errors(self, seen: set) -> list[tuple[str, float, str]]:
+        """(name, monotonic time, message) of first ERRORs not in ``seen`` (added to it)."""
+        with self.lock:
+            out = [(n, t, m) for n, (t, m) in self.errors.items() if n not in seen]
+        seen.update(n for n, _, _ in out)
+        return sorted(out, key=lambda e: e[1])
 
     def snapshot(self) -> dict:
         with self.lock:
@@ -76,6 +95,23 @@ class DiagMonitor:
             time.sleep(0.01)
         raise TimeoutError(f'no /diagnostics from {prefix!r} within {timeout:g} s')
 
+    def publishers(self, topic: str, wait: float) -> list[str]:
+        """Nodes publishing ``topic`` as soon as discovery shows one (its node's name may
+        come up to 1 s after the endpoint), else [] after ``wait`` seconds."""
+        end, named_by = time.monotonic() + wait, None
+        while True:
+            infos = self.node.get_publishers_info_by_topic(topic)
+            now = time.monotonic()
+            if infos:
+                named_by = named_by or now + 1.0
+                if now >= named_by or not any(i.node_name.startswith('_NODE_NAME_UNKNOWN')
+                                              for i in infos):
+                    return sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                                   for i in infos})
+            elif now >= end:
+                return []
+            time.sleep(0.05)
+
     def wait_for(self, prefix: str, timeout: float) -> bool:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
@@ -91,6 +127,18 @@ class DiagMonitor:
         self.node.destroy_node()
         if self._own_context:
             rclpy.try_shutdown()
+
+
+def refuse_second_stack(monitor: DiagMonitor, hint: str, wait: float = DISCOVERY_WAIT):
+    """UsageError (one line, exit 2) when a plant already publishes PLANT_TOPIC on this ROS
+    domain: two stacks on one domain would drive each other's nodes (states, commands, fault
+    injections and lock-step clocks mix). ``hint`` says how to start one beside it."""
+    names = monitor.publishers(PLANT_TOPIC, wait)
+    if names:
+        raise UsageError(f'another EHA stack runs on ROS domain '
+                         f'{os.environ.get("ROS_DOMAIN_ID", "0")} ({", ".join(names)} publishes '
+                         f'{PLANT_TOPIC}): stop it, or run this one on a domain of its own: '
+                         f'{hint}')
 
 
 class CpuMeter:

@@ -5,6 +5,8 @@ stack starts the same executables with the same YAML.
 """
 from __future__ import annotations
 
+import ctypes
+import functools
 import os
 import signal
 import subprocess
@@ -25,6 +27,33 @@ def cpu_seconds(pid: int) -> float:
         fields = fh.read().rsplit(')', 1)[1].split()
     ticks = os.sysconf('SC_CLK_TCK')
     return (int(fields[11]) + int(fields[12])) / ticks
+
+
+PR_SET_PDEATHSIG = 1                     # prctl(2) option (linux/prctl.h)
+try:
+    _prctl = ctypes.CDLL(None, use_errno=True).prctl     # loaded here, not in the child
+except (OSError, AttributeError):        # not Linux: no parent-death signal
+    _prctl = None
+
+
+def _die_with_parent(parent: int) -> None:
+    """In the child before exec: SIGTERM when the parent exits (kept across exec); if the
+    parent is already gone (it died between fork and here), exit at once."""
+    if _prctl is not None:
+        _prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != parent:
+        os._exit(143)
+
+
+def spawn(cmd, **kw) -> subprocess.Popen:
+    """Popen in a session of its own (Ctrl-C in the terminal reaches the parent, which
+    stops the children in order) that dies with its parent: on Linux the kernel sends the
+    child SIGTERM when the process that started it exits for any reason, SIGKILL included
+    (prctl PR_SET_PDEATHSIG), and every node stops cleanly on SIGTERM. Precisely: when the
+    *thread* that started it ends, so start children from a thread that lives as long as
+    they should (the main thread, as run_stack, scripts/run and the tests do)."""
+    return subprocess.Popen(cmd, start_new_session=True,
+                            preexec_fn=functools.partial(_die_with_parent, os.getpid()), **kw)
 
 
 def node_command(name: str, config_dir: str | None = None, extra=(), files=None) -> list[str]:
@@ -58,7 +87,8 @@ def composed_command(nodes, config_dir: str | None = None, extra=None) -> list[s
 
 
 class Stack:
-    """Context manager: processes started in their own sessions, SIGINT then SIGKILL on exit.
+    """Context manager: processes started by :func:`spawn` (their own sessions, dying with
+    this process), SIGINT then SIGKILL on exit.
 
     composed=True runs the loop nodes among ``nodes`` (LOOP_NODES) as one eha_loop process
     (in-process topics between them; real time only), listed as 'eha_loop' in procs.
@@ -134,8 +164,7 @@ class Stack:
                 out = err = log
             else:
                 out, err = subprocess.DEVNULL, subprocess.PIPE
-            self.procs[name] = subprocess.Popen(cmd, env=self.env, stdout=out, stderr=err,
-                                                text=True, start_new_session=True)
+            self.procs[name] = spawn(cmd, env=self.env, stdout=out, stderr=err, text=True)
         return self
 
     def dead(self) -> dict:

@@ -104,6 +104,7 @@ def dds_latency(duration: float = 10.0) -> dict:
     from rclpy.executors import SingleThreadedExecutor
     from eha_msgs.msg import ActuatorState, PositionEstimate
     from ..nodes.common import stream_qos
+    from ..stack import spawn
 
     env = dict(os.environ)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -142,9 +143,8 @@ def dds_latency(duration: float = 10.0) -> dict:
                                                 for _ in iter(stop.is_set, True)], daemon=True)
         spin.start()
         for cmd in (est_cmd, plant_cmd):
-            procs.append(subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
-                                          stderr=subprocess.PIPE, text=True,
-                                          start_new_session=True))
+            procs.append(spawn(cmd, env=env, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True))
         end = time.monotonic() + 60.0
         while time.monotonic() < end and len(est_t) < 500:
             time.sleep(0.05)

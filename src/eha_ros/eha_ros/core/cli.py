@@ -1,6 +1,7 @@
 """Command-line guard: user mistakes end in one line on stderr and a non-zero exit."""
 from __future__ import annotations
 
+import signal
 import sys
 from typing import Callable
 
@@ -24,3 +25,21 @@ def guarded(prog: str, main: Callable[[], int | None]) -> int:
     except KeyboardInterrupt:
         return 130
     return int(code or 0)
+
+
+def interrupt_on_signals() -> list:
+    """SIGTERM, SIGHUP and SIGINT end a run as Ctrl-C does: KeyboardInterrupt in the main
+    thread, once. The clean stop that follows (nodes stopped in order, the run's JSON and
+    recording finished) is not cut short by a second signal; the children are bounded by
+    Stack.stop's timeout and SIGKILL. Returns the list the first signal's number goes to."""
+    fired = []
+
+    def handler(signum, frame):
+        if not fired:
+            fired.append(signum)
+            raise KeyboardInterrupt
+        print(f'{signal.Signals(signum).name}: already stopping', file=sys.stderr, flush=True)
+
+    for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
+        signal.signal(sig, handler)
+    return fired

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import yaml
 
@@ -105,6 +105,9 @@ class Schema:
 
     node: str
     params: Sequence[Param]
+    # cross-key checks of the whole validated set (raises ParamError, one line): what the node
+    # would refuse when it builds its core object, so check_config refuses exactly the same
+    check: Callable[[dict], None] | None = field(default=None, compare=False, repr=False)
     by_name: dict = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -114,7 +117,7 @@ class Schema:
 
     def __add__(self, other: 'Schema') -> 'Schema':
         """Shared parameters + a node's own: the result is named after the added (node) part."""
-        return Schema(other.node, list(self.params) + list(other.params))
+        return Schema(other.node, list(self.params) + list(other.params), other.check)
 
     def defaults(self) -> dict:
         return {p.name: p.default for p in self.params if not p.required}
@@ -138,8 +141,8 @@ class Schema:
             try:
                 out[key] = spec.check(value)
             except ValueError:
-                raise ParamError(f'{where}: {key} = {value!r}: expected {spec.expected()}') \
-                    from None
+                raise ParamError(f'{where}: {key} = {value!r}: expected {spec.expected()}'
+                                 f'{_yaml_float_hint(spec, value)}') from None
         for spec in self.params:
             if spec.name in out:
                 continue
@@ -148,6 +151,8 @@ class Schema:
                                  f'{spec.name!r} for node {self.node!r}: expected '
                                  f'{spec.expected()}')
             out[spec.name] = spec.default
+        if self.check is not None:
+            self.check(out)
         return out
 
 
@@ -246,6 +251,20 @@ def read_params_file(path: str, node: str, namespace: str = '/') -> dict:
 ROS_BUILTINS = ('use_sim_time', 'start_type_description_service')
 
 
+def _yaml_float_hint(spec: 'Param', value) -> str:
+    """YAML 1.1 (PyYAML, rcl) reads 5e-7 as a string: say how to write the number."""
+    if not spec.type.startswith('float'):
+        return ''
+    for v in value if isinstance(value, (list, tuple)) else [value]:
+        try:
+            if isinstance(v, str) and math.isfinite(float(v)):
+                return (f' ({v!r} is a string in YAML 1.1: a float needs a dot and a signed '
+                        f'exponent, e.g. 5.0e-7)')
+        except ValueError:
+            continue
+    return ''
+
+
 def load(schema: Schema, files: Sequence[str] = (), overrides: Mapping[str, Any] | None = None,
          node: str | None = None, namespace: str = '/', wildcards: bool = True) -> dict:
     """Merge params files and overrides with rclpy's precedence, validate, fill defaults.
@@ -298,8 +317,16 @@ def default_config_dir() -> str:
     return os.path.join(os.getcwd(), 'config')
 
 
+# --ros-args flags that take a value (rcl arguments.c), and the log levels rcl accepts
+_VALUE_FLAGS = ('--params-file', '-p', '--param', '-r', '--remap', '--log-level',
+                '--log-file-name', '-e', '--enclave')
+_LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal', 'unset')
+
+
 def parse_ros_args(argv: Sequence[str]) -> tuple[list[str], dict, str | None, str]:
-    """Pick params files, -p overrides, node-name and namespace remaps out of --ros-args."""
+    """Pick params files, -p overrides, node-name and namespace remaps out of --ros-args.
+    A flag without its value or a log level rcl would refuse is a ParamError (one line)
+    here, before rcl prints its own error and rclpy a traceback."""
     files: list[str] = []
     overrides: dict = {}
     name = None
@@ -312,24 +339,29 @@ def parse_ros_args(argv: Sequence[str]) -> tuple[list[str], dict, str | None, st
             in_ros = True
         elif arg == '--':
             in_ros = False
-        elif in_ros and arg == '--params-file' and i + 1 < len(argv):
-            files.append(argv[i + 1])
-            i += 1
-        elif in_ros and arg in ('-p', '--param') and i + 1 < len(argv):
-            key, sep, text = argv[i + 1].partition(':=')
-            if not sep:
-                raise ParamError(f'command line: -p {argv[i + 1]!r}: expected name:=value')
-            try:
-                overrides[key] = yaml.safe_load(text) if text else ''
-            except yaml.YAMLError:
-                overrides[key] = text
-            i += 1
-        elif in_ros and arg in ('-r', '--remap') and i + 1 < len(argv):
-            src, _, dst = argv[i + 1].partition(':=')
-            if src == '__node' or src.endswith(':__node'):
-                name = dst
-            elif src == '__ns' or src.endswith(':__ns'):
-                namespace = dst
+        elif in_ros and arg in _VALUE_FLAGS:
+            if i + 1 >= len(argv) or argv[i + 1] in ('--', '--ros-args'):
+                raise ParamError(f'command line: --ros-args {arg} at the end without its value')
+            value = argv[i + 1]
+            if arg == '--params-file':
+                files.append(value)
+            elif arg in ('-p', '--param'):
+                key, sep, text = value.partition(':=')
+                if not sep:
+                    raise ParamError(f'command line: -p {value!r}: expected name:=value')
+                try:
+                    overrides[key] = yaml.safe_load(text) if text else ''
+                except yaml.YAMLError:
+                    overrides[key] = text
+            elif arg in ('-r', '--remap'):
+                src, _, dst = value.partition(':=')
+                if src == '__node' or src.endswith(':__node'):
+                    name = dst
+                elif src == '__ns' or src.endswith(':__ns'):
+                    namespace = dst
+            elif arg == '--log-level' and value.rpartition(':=')[2].lower() not in _LOG_LEVELS:
+                raise ParamError(f'command line: --log-level {value!r}: expected one of '
+                                 f'{", ".join(_LOG_LEVELS[:-1])} (or logger:=level)')
             i += 1
         i += 1
     return files, overrides, name, namespace

@@ -9,17 +9,32 @@ import os
 import numpy as np
 
 
+FINISHED = ('summary.json', 'stack.json')      # a folder holding one of these is a finished run
+
+
 def run_dir(base: str = 'out', name: str | None = None) -> str:
-    """A folder out/<name or timestamp>; an existing one is reused only while it holds no
-    summary.json (so a run never overwrites another run's report)."""
+    """A folder base/<name or timestamp>. ``name`` is one folder name (no path: a run stays
+    under ``base``); a folder holding a finished run (FINISHED) is never reused: -1, -2, ...
+    are appended. A bad name or a base that cannot be written is a UsageError (one line)."""
+    from .cli import UsageError
+    if name is not None and (not name or name in ('.', '..') or os.sep in name
+                             or (os.altsep and os.altsep in name)):
+        raise UsageError(f'--name {name!r}: expected a plain folder name (no path), '
+                         f'the run folder is created under {base}/')
     stamp = name or datetime.datetime.now().strftime('run-%Y%m%d-%H%M%S')
     path = os.path.join(base, stamp)
     i = 1
-    while os.path.exists(os.path.join(path, 'summary.json')) or \
+    while any(os.path.exists(os.path.join(path, f)) for f in FINISHED) or \
             (os.path.exists(path) and not os.path.isdir(path)):
         path = os.path.join(base, f'{stamp}-{i}')
         i += 1
-    os.makedirs(path, exist_ok=True)
+    try:
+        os.makedirs(path, exist_ok=True)
+        probe = os.path.join(path, '.write-test')
+        open(probe, 'w').close()
+        os.remove(probe)
+    except OSError as err:
+        raise UsageError(f'cannot write the run folder {path}: {err.strerror or err}') from None
     return path
 
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import re
 import signal
 import sys
-import threading
 import time
 from typing import Callable
 
@@ -88,10 +88,16 @@ def spin(argv, make_nodes: Callable) -> int:
     from rclpy.signals import SignalHandlerOptions
     # We own SIGINT/SIGTERM: stop the nodes' own threads first, then shut rclpy down,
     # so nothing publishes on an invalid context during shutdown.
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    stop = threading.Event()
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as err:          # rclpy's RCLError: a malformed --ros-args list
+        raise ParamError(f'ROS arguments: {rcl_message(err)}') from None
+    # the handler only appends to a list: no lock. An Event.set() in a handler deadlocks when
+    # a second signal lands while the first handler holds the Event's lock (seen: SIGTERM
+    # twice during shutdown left eha_loop hung forever)
+    stop: list = []
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, lambda signum, _: stop.append(signum))
     nodes = []
     try:
         nodes = make_nodes()
@@ -102,7 +108,7 @@ def spin(argv, make_nodes: Callable) -> int:
         # collector, so a full collection does not stall a 1 kHz loop for tens of ms
         gc.collect()
         gc.freeze()
-        while not stop.is_set() and rclpy.ok() and \
+        while not stop and rclpy.ok() and \
                 not any(getattr(n, 'done', False) for n in nodes):
             executor.spin_once(timeout_sec=0.1)     # a node may end itself (node.done)
     except KeyboardInterrupt:
@@ -116,6 +122,13 @@ def spin(argv, make_nodes: Callable) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return max((int(getattr(n, 'exit_code', 0) or 0) for n in nodes), default=0)
+
+
+def rcl_message(err: Exception) -> str:
+    """rcl's own words without the 'failed to initialize rcl' prefix and the ', at
+    /project/src/rcl/arguments.c:419' source locations."""
+    text = str(err).split('failed to initialize rcl: ', 1)[-1]
+    return re.sub(r', at /\S+:\d+', '', text).strip()
 
 
 def make_executor():

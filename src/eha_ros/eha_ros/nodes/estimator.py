@@ -105,6 +105,8 @@ def make_node(params: dict):
                 self.get_logger().error(f'seq {seq}: {name}: filter and position sensor disagree '
                                         f'beyond the sensor band (the estimate falls back on '
                                         f'the sensor)')
+            if adapt.alarm(verdict):         # on /diagnostics now: an alarm shorter than the
+                self.publish_diagnostics()   # diagnostics period would otherwise be missed
             elif verdict == adapt.MODEL:
                 self.get_logger().warning(f'seq {seq}: model_mismatch (adaptive model at its '
                                           f'bound or persistent innovation bias)')

@@ -18,7 +18,7 @@ from collections import deque
 from itertools import islice
 
 from ..core.redundancy import ChannelSample, EventLog, SwitchManager
-from ..core.redundancy.params import SCHEMA, check
+from ..core.redundancy.params import SCHEMA
 from ..core.stats import Counters, LoopStats
 from . import diag
 from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
@@ -39,7 +39,6 @@ def make_node(params: dict):
         def __init__(self):
             super().__init__('switch_manager')
             self.p = p = declare_and_validate(self, SCHEMA, params)
-            check(p)
             self.Ts = p['plant.sim.Ts']
             self.max_cmd_age_ticks = int(round(p['switch.health.speed.max_command_age'] /
                                                self.Ts))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import subprocess
@@ -18,7 +19,7 @@ import sys
 import threading
 import time
 
-from ..core.cli import UsageError, guarded
+from ..core.cli import UsageError, guarded, interrupt_on_signals
 from ..core.params import default_config_dir
 from ..core.report import run_dir
 
@@ -73,16 +74,26 @@ def sweep_overrides(args) -> dict:
 
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
+    interrupt_on_signals()
     return guarded('run', lambda: run(args))
 
 
 def run(args) -> int:
     from ..core.batch import node_params
     from ..core.sweep.params import SCHEMA, build_plan
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise UsageError(f'--timeout {args.timeout:g}: expected a finite number of seconds > 0')
     over = sweep_overrides(args)
     # validate the sweep here, so a bad option is one line before anything starts
     sweep_p = node_params('sweep', SCHEMA, args.config, {f'sweep:{k}': v for k, v in over.items()})
     plan = build_plan(sweep_p)
+    if args.mode != 'batch':
+        from ..monitor import DiagMonitor, refuse_second_stack
+        monitor = DiagMonitor('run_check')
+        try:
+            refuse_second_stack(monitor, 'ROS_DOMAIN_ID=N scripts/run ...')
+        finally:
+            monitor.close()
     out = run_dir(args.out, args.name)
     if args.stiffness:
         what = (f'load {sweep_p["sweep.load_amplitude"] / 1e3:g} kN at '
@@ -158,7 +169,7 @@ def run_batch(args, p, plan, out) -> dict:
 def run_nodes(args, over: dict, out: str) -> dict:
     """Lock-step: every node its own process; real time: the loop nodes composed (eha_loop);
     the sweep node (its own process) drives the run."""
-    from ..stack import Stack, node_command
+    from ..stack import Stack, node_command, spawn
     nodes = ['plant_sim', 'estimator', 'controller']
     if os.path.exists(os.path.join(args.config, 'switch_manager.yaml')):
         nodes.append('switch_manager')
@@ -172,9 +183,8 @@ def run_nodes(args, over: dict, out: str) -> dict:
                   '-p', f'sweep:sweep.run_name:={os.path.basename(out)}']
     for k, v in over.items():
         sweep_args += ['-p', f'sweep:{k}:={v}']
-    sweep = subprocess.Popen(node_command('sweep', args.config, sweep_args), env=stack.env,
-                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                             start_new_session=True)
+    sweep = spawn(node_command('sweep', args.config, sweep_args), env=stack.env,
+                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines = []
 
     def reader():                      # the sweep's output, echoed as it measures
@@ -192,7 +202,8 @@ def run_nodes(args, over: dict, out: str) -> dict:
             if dead:
                 os.killpg(sweep.pid, signal.SIGINT)
                 sweep.wait(timeout=60)
-                tails = {n: stack.stop()[n][1].strip().splitlines()[-1:] for n in dead}
+                stopped = stack.stop()
+                tails = {n: stopped[n][1].strip().splitlines()[-1:] for n in dead}
                 raise UsageError(f'node(s) died during the run: {dead} {tails}; see {logs}/')
             if time.monotonic() > deadline:
                 print(f'run: timeout after {args.timeout:.0f} s: stopping the sweep', flush=True)

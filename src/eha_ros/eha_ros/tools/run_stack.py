@@ -7,15 +7,20 @@ process. --structure processes runs each loop node as its own process as well. L
 every node its own process, the plant steps when command(k) has arrived.
 One folder per run: out/stack/<run>/ with logs/<process>.log and stack.json (commands, exit
 codes, CPU per process, the nodes' last /diagnostics).
+One stack per ROS domain: run_stack refuses to start (exit 2) while another plant publishes
+/eha/state on its domain; --domain-id N runs a second stack beside it. Ctrl-C, SIGTERM and
+SIGHUP stop the run cleanly (stack.json and recording written); the nodes die with run_stack
+whatever ends it, SIGKILL included.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
 
-from ..core.cli import UsageError, guarded
+from ..core.cli import UsageError, guarded, interrupt_on_signals
 from ..core.params import default_config_dir
 from ..core.report import run_dir, write_json
 
@@ -57,6 +62,9 @@ def parse(argv):
                     help='leave the switch manager out (channel A drives throughout)')
     ap.add_argument('-p', dest='params', action='append', default=[], metavar='NODE:KEY:=VALUE',
                     help='parameter override for one node')
+    ap.add_argument('--domain-id', type=int, default=None, metavar='N',
+                    help='ROS domain of this stack\'s nodes (default: ROS_DOMAIN_ID or 0); a '
+                         'second stack beside a running one needs its own (0..101, 215..232)')
     ap.add_argument('--config', default=default_config_dir(), help='config folder (config/)')
     ap.add_argument('--out', default=os.path.join('out', 'stack'),
                     help='base folder of the run folders (out/stack)')
@@ -68,8 +76,17 @@ def parse(argv):
 
 def plan(args) -> dict:
     """What to start: nodes, structure, per-node extra arguments. Raises UsageError."""
-    if args.duration is not None and args.duration <= 0:
-        raise UsageError(f'--duration {args.duration:g}: must be positive')
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise UsageError(f'--duration {args.duration:g}: expected a finite number of seconds > 0')
+    for opt in ('start_timeout', 'progress'):
+        v = getattr(args, opt)
+        if not (math.isfinite(v) and v >= (0 if opt == 'progress' else 1e-3)):
+            raise UsageError(f'--{opt.replace("_", "-")} {v:g}: expected a finite number of '
+                             f'seconds {">= 0" if opt == "progress" else "> 0"}')
+    if args.domain_id is not None and not (0 <= args.domain_id <= 101
+                                           or 215 <= args.domain_id <= 232):
+        raise UsageError(f'--domain-id {args.domain_id}: expected 0..101 or 215..232 (the ROS 2 '
+                         f'domains whose ports are valid on Linux)')
     structure = args.structure
     if structure == 'auto':
         structure = 'processes' if args.mode == 'lockstep' else 'composed'
@@ -168,16 +185,24 @@ def progress_line(elapsed: float, loop: dict, cpu: dict) -> str:
 
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
+    args.signals = interrupt_on_signals()
     return guarded('run_stack', lambda: run(args))
 
 
 def run(args) -> int:
-    from ..monitor import CpuMeter, DiagMonitor
+    from ..monitor import CpuMeter, DiagMonitor, refuse_second_stack
     p = plan(args)
-    out = run_dir(args.out, args.name)
+    if args.domain_id is not None:      # the monitor (rclpy.init) and every node read it
+        os.environ['ROS_DOMAIN_ID'] = str(args.domain_id)
+    monitor = DiagMonitor()
+    try:
+        refuse_second_stack(monitor, 'scripts/run_stack --domain-id N')
+        out = run_dir(args.out, args.name)
+    except BaseException:
+        monitor.close()
+        raise
     logs = os.path.join(out, 'logs')
     stack = build_stack(args, p, out)
-    monitor = DiagMonitor()
     stack.start()
     print(f'run_stack: {args.mode}, {p["structure"]}: started '
           f'{", ".join(stack.procs)} (logs in {logs}/)', flush=True)
@@ -190,16 +215,22 @@ def run(args) -> int:
     reason = 'duration'
     try:
         reason = wait_for_loop(stack, monitor, p['plant'], args.start_timeout)
-        print(f'run_stack: loop running after {time.monotonic() - t_start:.1f} s', flush=True)
+        if reason == 'duration':
+            print(f'run_stack: loop running after {time.monotonic() - t_start:.1f} s',
+                  flush=True)
     except KeyboardInterrupt:
-        reason = 'interrupted during start-up'
+        reason = 'interrupted during start-up' + _signal_name(args)
     cpu.start()
     t0 = time.monotonic()
     last_print = t0
+    seen: set = set()
     try:
         while reason == 'duration':
             time.sleep(0.2)
             now = time.monotonic()
+            for name, t, message in monitor.new_errors(seen):
+                print(f'run_stack: {max(0.0, t - t0):6.1f} s: ERROR {name}: {message}',
+                      flush=True)
             dead = stack.dead()
             if 'sweep' in dead and dead['sweep'] == 0 and len(dead) == 1:
                 reason = 'sweep finished'
@@ -214,30 +245,43 @@ def run(args) -> int:
                 print(progress_line(now - t0, loop_status(monitor, p['plant']), cpu.read()),
                       flush=True)
     except KeyboardInterrupt:
-        reason = 'interrupted'
+        reason = 'interrupted' + _signal_name(args)
     elapsed = time.monotonic() - t0
     cpu_share = cpu.read()
     diagnostics = monitor.snapshot()
+    errors = {n: {'t_s': round(t - t0, 3), 'message': m} for n, (t, m) in
+              dict(monitor.errors).items()}      # before the stop: shutdown is not a fault
     results = stack.stop()
     monitor.close()
     codes = {n: rc for n, (rc, _) in results.items()}
     summary = {'mode': args.mode, 'structure': p['structure'], 'plant': p['plant'],
                'processes': {n: ' '.join(c) for n, c in stack.commands().items()},
                'stop_reason': reason, 'wall_s': elapsed, 'exit_codes': codes,
+               'errors': errors,
                'cpu_share': cpu_share, 'diagnostics': diagnostics}
     write_json(os.path.join(out, 'stack.json'), summary, sort_keys=True)
     print(progress_line(elapsed, next((v for k, v in sorted(diagnostics.items())
                                        if k.startswith(f'{p["plant"]}: ')), {}), cpu_share))
     bad = {n: c for n, c in codes.items() if c not in (0, None)}
-    print(f'run_stack: stopped ({reason}) after {elapsed:.1f} s; '
-          f'{"exit codes " + str(bad) if bad else "all processes exited cleanly"}; '
+    failed = reason != 'duration' and not reason.startswith(('sweep', 'interrupted')) or bad \
+        or errors
+    print(f'run_stack: {"FAILED: " if failed else ""}stopped ({reason}) after {elapsed:.1f} s; '
+          f'{"exit codes " + str(bad) if bad else "every process exited with 0"}'
+          f'{"; ERROR on /diagnostics from " + ", ".join(sorted(errors)) if errors else ""}; '
           f'{out}/stack.json')
-    if reason != 'duration' and not reason.startswith(('sweep', 'interrupted')) or bad:
+    if failed:
         for name in bad:
             tail = _tail(os.path.join(logs, f'{name}.log'))
             print(f'run_stack: {name}: {tail}', file=sys.stderr)
         return 1
     return 0
+
+
+def _signal_name(args) -> str:
+    """' by SIGTERM' etc. for the stop reason (main() records the signal)."""
+    import signal
+    fired = getattr(args, 'signals', None)
+    return f' by {signal.Signals(fired[0]).name}' if fired else ''
 
 
 def _tail(path: str) -> str:

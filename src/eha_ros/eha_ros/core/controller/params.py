@@ -2,7 +2,7 @@
 loop settings (config/controller_node.yaml) and the shared plant.* set (config/plant.yaml)."""
 from __future__ import annotations
 
-from ..params import Param, Schema
+from ..params import Param, ParamError, Schema
 from ..plant.parameters import PLANT_SCHEMA
 
 TF = [Param(f'{name}.{part}', 'float[]', unit, doc=doc)
@@ -36,4 +36,28 @@ NODE = Schema('controller', TF + [
     Param('control.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
 ])
 
-SCHEMA = PLANT_SCHEMA + NODE
+
+
+def check(p: dict) -> None:
+    """What the node refuses when it builds its PositionController, one line each: a transfer
+    function without a non-zero coefficient or improper (num of higher degree than den), then
+    anything the build itself rejects (prefilter DC gain, anti-windup poles vs G's order)."""
+    import numpy as np
+    for name in ('position_controller', 'prefilter', 'velocity_controller'):
+        num = np.trim_zeros(np.asarray(p[f'{name}.num'], float), 'f')
+        den = np.trim_zeros(np.asarray(p[f'{name}.den'], float), 'f')
+        for part, poly in (('num', num), ('den', den)):
+            if poly.size == 0:
+                raise ParamError(f'{name}.{part} = {p[f"{name}.{part}"]}: expected a polynomial '
+                                 f'with a non-zero coefficient (descending powers of s)')
+        if num.size > den.size:
+            raise ParamError(f'{name}: num of degree {num.size - 1} over den of degree '
+                             f'{den.size - 1}: expected a proper transfer function')
+    from .position import PositionController
+    try:
+        PositionController.from_params(p)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
+        raise ParamError(f'controller: {err}') from None
+
+
+SCHEMA = Schema('controller', list(PLANT_SCHEMA.params) + list(NODE.params), check)

@@ -15,6 +15,7 @@ FAULTS = {
     'pump_leakage': "channel's pump leakage coefficients C_p, C_r times magnitude (>= 0)",
     'pressure_sensor': 'bias magnitude (Pa) on both pressure readings; NaN = both stuck',
 }
+CLEAR = 'clear'         # not a fault: removes every active fault (channel, magnitude ignored)
 
 
 @dataclass
@@ -29,13 +30,20 @@ class Fault:
 class FaultSet:
     """Active faults; writes their effect into the input vector U and sensor fault vector."""
 
-    def __init__(self):
+    def __init__(self, position_range: float = math.inf):
+        """position_range (m): the position sensor's measuring range (the stroke), the largest
+        |magnitude| of msp_bias, msp_noise and msp_drift (per second)."""
         self.active: dict[tuple[str, int], Fault] = {}
+        self.limits = dict.fromkeys(('msp_bias', 'msp_noise', 'msp_drift'), position_range)
 
     def inject(self, name, channel, magnitude, duration, t) -> tuple[bool, str]:
+        if name == CLEAR:
+            n = len(self.active)
+            self.clear()
+            return True, f'cleared {n} active fault(s)'
         if name not in FAULTS:
             return False, (f'unknown fault {name!r}: expected one of '
-                           f'{", ".join(sorted(FAULTS))}')
+                           f'{", ".join(sorted(FAULTS) + [CLEAR])}')
         try:
             channel = int(channel)
             magnitude = float(magnitude)
@@ -53,6 +61,10 @@ class FaultSet:
             return False, f'fault pump_leakage: magnitude = {magnitude}: expected >= 0'
         if name == 'msp_noise' and magnitude < 0:
             return False, f'fault msp_noise: magnitude = {magnitude}: expected sigma >= 0 m'
+        limit = self.limits.get(name, math.inf)
+        if abs(magnitude) > limit:
+            return False, (f'fault {name}: magnitude = {magnitude:g}: beyond the sensor range '
+                           f'(|magnitude| <= {limit:g})')
         if name.startswith('msp') or name == 'pressure_sensor':
             channel = 0        # one position sensor and one pair of pressure sensors
         t_end = math.inf if duration == 0 else t + duration

@@ -69,7 +69,7 @@ class EhaPlant:
         self._nsub = self.p.substeps
         self._T = leakage_table(self.p)
         self._seed = seed
-        self.faults = FaultSet()
+        self.faults = FaultSet(position_range=self.p.stroke)
         self.reset()
 
     # ------------------------------------------------------------------ set-up

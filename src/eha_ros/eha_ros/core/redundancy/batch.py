@@ -12,7 +12,7 @@ import numpy as np
 
 from ..params import default_config_dir, load
 from ..plant import EhaPlant
-from .params import SCHEMA, check
+from .params import SCHEMA
 from .state_machine import SwitchManager
 
 STATE_CODES = {'ACTIVE_A': 0, 'ACTIVE_B': 1, 'SWITCHING': 2, 'DEGRADED': 3, 'FAILED_SAFE': 4}
@@ -27,7 +27,6 @@ def switch_params(overrides: dict | None = None) -> dict:
     named = {k if ':' in k else f'switch_manager:{k}': v for k, v in (overrides or {}).items()}
     p = load(SCHEMA, [config('plant.yaml'), config('switch_manager.yaml')], named,
              node='switch_manager')
-    check(p)
     return p
 
 

@@ -89,9 +89,6 @@ NODE = Schema('switch_manager', [
           doc='folder of the switch-event log events.jsonl ("" = no file)'),
 ])
 
-SCHEMA = Schema('switch_manager', list(PLANT_SCHEMA.params) + list(NODE.params))
-
-
 def check(p: dict) -> None:
     """Cross-key checks (one line each): clear levels must not exceed trip levels."""
     from ..params import ParamError
@@ -104,3 +101,6 @@ def check(p: dict) -> None:
     if lo > hi:
         raise ParamError(f'{H}pressure.low_side_min = {lo!r}: expected <= '
                          f'{H}pressure.low_side_max ({hi!r})')
+
+
+SCHEMA = Schema('switch_manager', list(PLANT_SCHEMA.params) + list(NODE.params), check)
