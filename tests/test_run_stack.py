@@ -8,6 +8,7 @@ import threading
 
 import pytest
 
+from eha_ros.stack import proc_stat
 from ros_util import ROOT, wait_for
 
 pytestmark = pytest.mark.ros
@@ -102,12 +103,11 @@ class Started:
     def children(self):
         """pids whose parent is run_stack's interpreter (scripts/run_stack execs it)."""
         out = []
-        for d in os.listdir('/proc'):
+        for d in filter(str.isdigit, os.listdir('/proc')):
             try:
-                with open(f'/proc/{d}/stat') as fh:
-                    if int(fh.read().rsplit(')', 1)[1].split()[1]) == self.proc.pid:
-                        out.append(int(d))
-            except (ValueError, OSError):
+                if int(proc_stat(int(d))[1]) == self.proc.pid:
+                    out.append(int(d))
+            except OSError:              # ended meanwhile
                 continue
         return out
 
@@ -158,8 +158,7 @@ def test_one_stack_per_domain_a_second_beside_it_and_sigterm_stops_cleanly(tmp_p
 def _alive(pid: int) -> bool:
     """Running (a zombie waiting for a reaper that may never come in a container is not)."""
     try:
-        with open(f'/proc/{pid}/stat') as fh:
-            return fh.read().rsplit(')', 1)[1].split()[0] != 'Z'
+        return proc_stat(pid)[0] != 'Z'
     except OSError:
         return False
 

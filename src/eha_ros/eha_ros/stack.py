@@ -21,10 +21,16 @@ from .core.params import default_config_dir
 LOCKSTEP_PREFIX = {'plant_sim': 'sim_node', 'hardware_bridge': 'bridge'}
 
 
+def proc_stat(pid: int) -> list[str]:
+    """The fields of /proc/<pid>/stat after the command name (proc(5) numbering minus 3:
+    [0] state, [1] parent pid, [11] utime, [12] stime); OSError when there is no such pid."""
+    with open(f'/proc/{pid}/stat') as fh:
+        return fh.read().rsplit(')', 1)[1].split()
+
+
 def cpu_seconds(pid: int) -> float:
     """User + system CPU time of a process (all threads), from /proc."""
-    with open(f'/proc/{pid}/stat') as fh:
-        fields = fh.read().rsplit(')', 1)[1].split()
+    fields = proc_stat(pid)
     ticks = os.sysconf('SC_CLK_TCK')
     return (int(fields[11]) + int(fields[12])) / ticks
 

@@ -1,6 +1,7 @@
 """Command-line guard: user mistakes end in one line on stderr and a non-zero exit."""
 from __future__ import annotations
 
+import math
 import signal
 import sys
 from typing import Callable
@@ -25,6 +26,14 @@ def guarded(prog: str, main: Callable[[], int | None]) -> int:
     except KeyboardInterrupt:
         return 130
     return int(code or 0)
+
+
+def require_seconds(option: str, value: float, least: float = 0.0, strict: bool = True) -> None:
+    """UsageError (one line) unless ``value`` is a finite number of seconds above ``least``
+    (at least ``least`` with strict=False): nan and inf included."""
+    if not (math.isfinite(value) and (value > least if strict else value >= least)):
+        raise UsageError(f'{option} {value:g}: expected a finite number of seconds '
+                         f'{">" if strict else ">="} {least:g}')
 
 
 def interrupt_on_signals() -> list:

@@ -105,13 +105,13 @@ def make_node(params: dict):
                 self.get_logger().error(f'seq {seq}: {name}: filter and position sensor disagree '
                                         f'beyond the sensor band (the estimate falls back on '
                                         f'the sensor)')
-            if adapt.alarm(verdict):         # on /diagnostics now: an alarm shorter than the
-                self.publish_diagnostics()   # diagnostics period would otherwise be missed
             elif verdict == adapt.MODEL:
                 self.get_logger().warning(f'seq {seq}: model_mismatch (adaptive model at its '
                                           f'bound or persistent innovation bias)')
             else:
                 self.get_logger().info(f'seq {seq}: consistency ok')
+            if adapt.alarm(verdict):         # on /diagnostics now: an alarm shorter than the
+                self.publish_diagnostics()   # diagnostics period would otherwise be missed
 
         def on_timer(self):
             if self.last_arrival is None:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import signal
 import subprocess
@@ -19,7 +18,7 @@ import sys
 import threading
 import time
 
-from ..core.cli import UsageError, guarded, interrupt_on_signals
+from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds
 from ..core.params import default_config_dir
 from ..core.report import run_dir
 
@@ -81,8 +80,7 @@ def main(argv=None) -> int:
 def run(args) -> int:
     from ..core.batch import node_params
     from ..core.sweep.params import SCHEMA, build_plan
-    if not (math.isfinite(args.timeout) and args.timeout > 0):
-        raise UsageError(f'--timeout {args.timeout:g}: expected a finite number of seconds > 0')
+    require_seconds('--timeout', args.timeout)
     over = sweep_overrides(args)
     # validate the sweep here, so a bad option is one line before anything starts
     sweep_p = node_params('sweep', SCHEMA, args.config, {f'sweep:{k}': v for k, v in over.items()})

@@ -15,12 +15,11 @@ whatever ends it, SIGKILL included.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import time
 
-from ..core.cli import UsageError, guarded, interrupt_on_signals
+from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds
 from ..core.params import default_config_dir
 from ..core.report import run_dir, write_json
 
@@ -76,13 +75,10 @@ def parse(argv):
 
 def plan(args) -> dict:
     """What to start: nodes, structure, per-node extra arguments. Raises UsageError."""
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise UsageError(f'--duration {args.duration:g}: expected a finite number of seconds > 0')
-    for opt in ('start_timeout', 'progress'):
-        v = getattr(args, opt)
-        if not (math.isfinite(v) and v >= (0 if opt == 'progress' else 1e-3)):
-            raise UsageError(f'--{opt.replace("_", "-")} {v:g}: expected a finite number of '
-                             f'seconds {">= 0" if opt == "progress" else "> 0"}')
+    if args.duration is not None:
+        require_seconds('--duration', args.duration)
+    require_seconds('--start-timeout', args.start_timeout, 1e-3, strict=False)
+    require_seconds('--progress', args.progress, 0.0, strict=False)
     if args.domain_id is not None and not (0 <= args.domain_id <= 101
                                            or 215 <= args.domain_id <= 232):
         raise UsageError(f'--domain-id {args.domain_id}: expected 0..101 or 215..232 (the ROS 2 '
@@ -185,11 +181,12 @@ def progress_line(elapsed: float, loop: dict, cpu: dict) -> str:
 
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
-    args.signals = interrupt_on_signals()
-    return guarded('run_stack', lambda: run(args))
+    fired = interrupt_on_signals()
+    return guarded('run_stack', lambda: run(args, fired))
 
 
-def run(args) -> int:
+def run(args, signals=()) -> int:
+    """``signals``: where interrupt_on_signals puts the signal that stopped the run."""
     from ..monitor import CpuMeter, DiagMonitor, refuse_second_stack
     p = plan(args)
     if args.domain_id is not None:      # the monitor (rclpy.init) and every node read it
@@ -219,7 +216,7 @@ def run(args) -> int:
             print(f'run_stack: loop running after {time.monotonic() - t_start:.1f} s',
                   flush=True)
     except KeyboardInterrupt:
-        reason = 'interrupted during start-up' + _signal_name(args)
+        reason = 'interrupted during start-up' + _signal_name(signals)
     cpu.start()
     t0 = time.monotonic()
     last_print = t0
@@ -245,7 +242,7 @@ def run(args) -> int:
                 print(progress_line(now - t0, loop_status(monitor, p['plant']), cpu.read()),
                       flush=True)
     except KeyboardInterrupt:
-        reason = 'interrupted' + _signal_name(args)
+        reason = 'interrupted' + _signal_name(signals)
     elapsed = time.monotonic() - t0
     cpu_share = cpu.read()
     diagnostics = monitor.snapshot()
@@ -277,11 +274,10 @@ def run(args) -> int:
     return 0
 
 
-def _signal_name(args) -> str:
-    """' by SIGTERM' etc. for the stop reason (main() records the signal)."""
+def _signal_name(signals) -> str:
+    """' by SIGTERM' etc. for the stop reason."""
     import signal
-    fired = getattr(args, 'signals', None)
-    return f' by {signal.Signals(fired[0]).name}' if fired else ''
+    return f' by {signal.Signals(signals[0]).name}' if signals else ''
 
 
 def _tail(path: str) -> str:

@@ -37,7 +37,6 @@ NODE = Schema('controller', TF + [
 ])
 
 
-
 def check(p: dict) -> None:
     """What the node refuses when it builds its PositionController, one line each: a transfer
     function without a non-zero coefficient or improper (num of higher degree than den), then
