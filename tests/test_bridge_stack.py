@@ -88,7 +88,7 @@ def run_case(plant, tmp, ros_node):
         if peer is not None:
             code, out, err = stop_process(peer)
             assert 'Traceback' not in err, err
-    assert 'lock-step start: recorder subscribed to every /eha/* topic' in res[plant][1]
+    assert 'start gate: recorder subscribed to every /eha/* topic' in res[plant][1]
     # the plant side's own stream is recorded from the first ticks (the start gate)
     (_, first), = recording.read(rec, ['/eha/state'])['/eha/state'][:1]
     assert first.seq < 50, (plant, first.seq)

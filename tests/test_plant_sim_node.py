@@ -254,11 +254,11 @@ def held_plant(ros_node, ns, *params):
 
 
 def test_lockstep_start_waits_for_named_subscribers(ros_node):
-    """sim_node.lockstep_start_after (what run_stack --record sets for the recorder): tick 0
+    """sim_node.start_after (what run_stack --record sets for the recorder): tick 0
     is held until the named node subscribes to every /eha topic with a publisher."""
     from eha_msgs.msg import ActuatorCommand, PlantTruth
     me = ros_node.get_name()
-    proc, states = held_plant(ros_node, '/lg', '-p', f'sim_node.lockstep_start_after:=[{me}]')
+    proc, states = held_plant(ros_node, '/lg', '-p', f'sim_node.start_after:=[{me}]')
     try:
         time.sleep(1.5)          # we do not subscribe to eha/sim/truth or eha/command yet: held
         assert max(s.seq for s in states) == 0
@@ -267,17 +267,17 @@ def test_lockstep_start_waits_for_named_subscribers(ros_node):
         assert wait_for(lambda: states[-1].seq == 1, 20), 'tick 0 still held'
     finally:
         _, _, err = stop_process(proc)
-    assert f'lock-step start: {me} subscribed to every /lg/eha/* topic; stepping' in err, err
+    assert f'start gate: {me} subscribed to every /lg/eha/* topic; stepping' in err, err
 
 
 def test_lockstep_start_gives_up_after_its_timeout(ros_node):
-    proc, states = held_plant(ros_node, '/lt', '-p', 'sim_node.lockstep_start_after:=[nobody]',
-                              '-p', 'sim_node.lockstep_start_timeout:=1.0')
+    proc, states = held_plant(ros_node, '/lt', '-p', 'sim_node.start_after:=[nobody]',
+                              '-p', 'sim_node.start_timeout:=1.0')
     try:
         assert wait_for(lambda: states[-1].seq == 1, 20), 'tick 0 held beyond the timeout'
     finally:
         _, _, err = stop_process(proc)
-    assert 'lock-step start: still missing after 1 s: nobody on /lt/eha/' in err, err
+    assert 'start gate: still missing after 1 s: nobody on /lt/eha/' in err, err
     assert 'stepping anyway' in err
 
 

@@ -151,7 +151,7 @@ def run_recorded(node, tmp_path, name, seed, ticks):
     try:
         # controller and recorder subscribed: the whole script goes out at once, tick-locked.
         # (The plant holds tick 0 until the recorder has every topic, sim_node.
-        # lockstep_start_after; the steps leave the script 1500 ticks to arrive.)
+        # start_after; the steps leave the script 1500 ticks to arrive.)
         assert wait_for(lambda: ref.get_subscription_count() >= 2, 90), 'controller not up'
         for k, x in STEPS + [(HOLD_TICK, STEPS[-1][1])]:
             ref.publish(PositionReference(seq=k, position=x))

@@ -72,6 +72,16 @@ class DiagMonitor:
         seen.update(n for n, _, _ in out)
         return sorted(out, key=lambda e: e[1])
 
+    def silent(self, after: float) -> dict[str, float]:
+        """{node: seconds} of the nodes whose newest status (any of theirs) is older than
+        ``after`` seconds: stopped (SIGSTOP), hung, or dead. Nodes never heard are not listed."""
+        now, newest = time.monotonic(), {}
+        with self.lock:
+            for name, t in self.arrival.items():
+                node = name.split(': ', 1)[0]
+                newest[node] = max(newest.get(node, t), t)
+        return {n: now - t for n, t in sorted(newest.items()) if now - t > after}
+
     def snapshot(self) -> dict:
         with self.lock:
             return {k: dict(v) for k, v in self.latest.items()}

@@ -16,8 +16,8 @@ import time
 from .core.batch import NODE_FILES
 from .core.params import default_config_dir
 
-# plant-side nodes and the prefix of their lock-step parameters (plant_sim_params.
-# lockstep_params): their own switch (they publish /clock); the others use sim time
+# plant-side nodes and the prefix of their loop parameters (plant_sim_params.lockstep_params):
+# their own lock-step switch (they publish /clock; the others use sim time) and start gate
 LOCKSTEP_PREFIX = {'plant_sim': 'sim_node', 'hardware_bridge': 'bridge'}
 
 
@@ -127,8 +127,11 @@ class Stack:
                     self.extra[name] += ['-p', 'use_sim_time:=true']
                     continue
                 self.extra[name] += ['-p', f'{name}:{pre}.lockstep:=true']
-                if record:      # the plant side holds tick 0 until the recorder has subscribed
-                    self.extra[name] += ['-p', f'{name}:{pre}.lockstep_start_after:=[recorder]']
+        for name in self.nodes if record else ():
+            pre = LOCKSTEP_PREFIX.get(name)
+            if pre:         # the plant side holds tick 0 until the recorder has subscribed
+                self.extra.setdefault(name, []).extend(
+                    ['-p', f'{name}:{pre}.start_after:=[recorder]'])
         if record:
             self.extra.setdefault('recorder', [])
             self.extra['recorder'] += ['-p', f'recorder:recorder.output:={record}']
@@ -140,6 +143,7 @@ class Stack:
         self.env = dict(os.environ, **(env or {}))
         self.env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
         self.procs: dict[str, subprocess.Popen] = {}
+        self.recovered: dict | None = None     # recording.recover's result, when it ran
         self._logs = []
 
     def commands(self) -> dict:
@@ -186,9 +190,22 @@ class Stack:
         if 'recorder' in self.procs:       # after the others: their last messages are recorded
             out.update(self._stop_group({'recorder': self.procs['recorder']},
                                         max(end, time.monotonic() + 5.0)))
+            if out['recorder'][0] != 0 and self.record and os.path.exists(self.record):
+                self.recovered = self._recover()
         for log in self._logs:
             log.close()
         return out
+
+    def _recover(self) -> dict:
+        """The recorder did not finish its file (killed, or failed): make it a finished one
+        with everything that reached the disk (recording.recover)."""
+        from .core.recording import recover
+        try:
+            return recover(self.record)
+        except OSError as err:
+            return {'error': f'{self.record}: recovery failed: {err.strerror or err} (it still '
+                             f'reads with core.recording.read, up to its last complete chunk; '
+                             f'core.recording.recover finishes it once there is room)'}
 
     @staticmethod
     def _stop_group(procs: dict, end: float) -> dict:
@@ -196,6 +213,7 @@ class Stack:
             if p.poll() is None:
                 try:
                     os.killpg(p.pid, signal.SIGINT)
+                    os.killpg(p.pid, signal.SIGCONT)     # a stopped one acts on it too
                 except ProcessLookupError:
                     pass
         out = {}

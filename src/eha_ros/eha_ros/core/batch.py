@@ -157,7 +157,7 @@ class BatchLoop:
             verdict = 0
         ctl.request(reference)
         if mgr is not None and SAFE.position_fault(verdict):
-            mgr.position_fault(SAFE.manager_reason(verdict))
+            mgr.safe_state(SAFE.manager_reason(verdict))
         for ch, why in self.commands.get(k, ()):
             self.responses.append((k, 'command', mgr.request(ch, why)))
         if mgr is not None:

@@ -36,6 +36,15 @@ def require_seconds(option: str, value: float, least: float = 0.0, strict: bool 
                          f'{">" if strict else ">="} {least:g}')
 
 
+_STOPPING = []          # non-empty once the program's clean stop has begun
+
+
+def stopping() -> None:
+    """The clean stop has begun (whatever ended the run): from now on a signal is reported,
+    it no longer interrupts (a KeyboardInterrupt inside the stop would cut it short)."""
+    _STOPPING.append(True)
+
+
 def interrupt_on_signals() -> list:
     """SIGTERM, SIGHUP and SIGINT end a run as Ctrl-C does: KeyboardInterrupt in the main
     thread, once. The clean stop that follows (nodes stopped in order, the run's JSON and
@@ -44,7 +53,7 @@ def interrupt_on_signals() -> list:
     fired = []
 
     def handler(signum, frame):
-        if not fired:
+        if not fired and not _STOPPING:
             fired.append(signum)
             raise KeyboardInterrupt
         print(f'{signal.Signals(signum).name}: already stopping', file=sys.stderr, flush=True)

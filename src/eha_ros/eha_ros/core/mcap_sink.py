@@ -2,8 +2,9 @@
 
 Producers (subscription callbacks) only enqueue ``(channel, receive time, bytes)``; one writer
 thread adds them to the file, so a slow disk or a chunk compression never blocks the executor.
-``close()`` writes everything queued and the summary (a file that is not closed has no index,
-but its chunks still read back with a non-seeking reader).
+``close()`` writes everything queued and the summary. A file that is not closed (recorder
+killed) has no index; its complete chunks read back with a non-seeking reader, and
+core.recording.recover makes it a finished file (Stack does when its recorder dies).
 """
 from __future__ import annotations
 
@@ -30,8 +31,10 @@ def stamp_ns(data: bytes) -> int | None:
 class McapSink:
     """One MCAP file: register topics from any thread, ``put`` messages, ``close`` to finish."""
 
-    def __init__(self, path: str, compression: str = 'zstd', chunk_size: int = 1 << 20,
-                 library: str = 'eha_ros recorder'):
+    def __init__(self, path: str, compression: str = 'zstd', chunk_size: int = 1 << 18,
+                 library: str = 'eha_ros recorder', on_error=None):
+        """``on_error(text)``: called once, from the writer thread, when writing fails (a full
+        disk): the owner reports it at once; the messages after it are counted, not written."""
         from mcap.writer import CompressionType, Writer
         self.path = path
         try:
@@ -52,6 +55,7 @@ class McapSink:
         self.received: Counter = Counter()     # channel -> messages put (producer thread)
         self.written: Counter = Counter()      # channel -> messages in the file (writer thread)
         self.error: str | None = None
+        self._on_error = on_error
         self._seq: Counter = Counter()
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._closed = False
@@ -96,6 +100,7 @@ class McapSink:
                         stop = True
                         continue
                     self._write(*item)
+                self._flush()
             if stop:
                 return
 
@@ -111,7 +116,21 @@ class McapSink:
                                      log_time if pub is None else pub, sequence=seq & 0xFFFFFFFF)
             self.written[channel] += 1
         except (OSError, ValueError) as err:
-            self.error = f'{self.path}: write failed: {err}'
+            self._failed(f'{self.path}: write failed: {getattr(err, "strerror", None) or err}')
+
+    def _flush(self):
+        """Completed chunks to the OS at once (a killed recorder loses at most the chunk being
+        filled, not also the file object's buffer); a full disk is reported now."""
+        if self.error is None:
+            try:
+                self._file.flush()
+            except OSError as err:
+                self._failed(f'{self.path}: write failed: {err.strerror or err}')
+
+    def _failed(self, text: str):
+        self.error = text
+        if self._on_error is not None:
+            self._on_error(text)
 
     def counts(self) -> dict[str, int]:
         """Messages written per topic."""

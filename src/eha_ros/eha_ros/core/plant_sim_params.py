@@ -14,11 +14,12 @@ def lockstep_params(prefix: str) -> list:
               doc='step only when the command of the previous state arrived; publish /clock'),
         Param(f'{prefix}.lockstep_timeout', 'float', 's', 1.0, 1e-3, 60.0,
               doc='lock-step: re-publish state(k) after this wall time without command(k)'),
-        Param(f'{prefix}.lockstep_start_after', 'str[]', '', [''], min_len=1,
-              doc='lock-step: hold tick 0 until these nodes subscribe to every /eha topic with '
-                  'a publisher (run_stack --record adds the recorder); empty string = none'),
-        Param(f'{prefix}.lockstep_start_timeout', 'float', 's', 30.0, 0.0, 600.0,
-              doc='lock-step: step anyway (with a warning) after this wall time at tick 0'),
+        Param(f'{prefix}.start_after', 'str[]', '', [''], min_len=1,
+              doc='hold tick 0 (real time: the loop\'s start) until these nodes subscribe to '
+                  'every /eha topic with a publisher (run_stack --record adds the recorder); '
+                  'empty string = none'),
+        Param(f'{prefix}.start_timeout', 'float', 's', 30.0, 0.0, 600.0,
+              doc='start anyway (with a warning) after this wall time at tick 0'),
     ]
 
 

@@ -17,7 +17,8 @@ SCHEMA = Schema('recorder', [
           doc='subscription queue depth (reliable topics): 1 s of a 1 kHz stream'),
     Param('recorder.compression', 'str', '', 'zstd', choices=('zstd', 'lz4', 'none'),
           doc='MCAP chunk compression'),
-    Param('recorder.chunk_size', 'int', 'B', 1 << 20, 1024, 1 << 30,
-          doc='MCAP chunk size before compression'),
+    Param('recorder.chunk_size', 'int', 'B', 1 << 18, 1024, 1 << 30,
+          doc='MCAP chunk size before compression: the most a killed recorder loses (the '
+              'chunk being filled; 256 KiB: about 0.3 s of the stack\'s streams)'),
     Param('recorder.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
 ])

@@ -12,6 +12,7 @@ recorder was killed (no summary) still reads, up to its last complete chunk.
 """
 from __future__ import annotations
 
+import os
 import re
 from collections import defaultdict
 from typing import Any, Iterable, NamedTuple, Sequence
@@ -89,6 +90,71 @@ def read_records(path: str, topics: Iterable[str] | None = None) -> dict[str, li
         out[channel.topic].append(Record(message.log_time, message.publish_time, msg,
                                          bytes(message.data)))
     return dict(out)
+
+
+def finished(path: str) -> bool:
+    """The file has its summary (the recorder closed it)."""
+    from mcap.reader import SeekingReader
+    with _open(path) as fh:
+        try:
+            return SeekingReader(fh).get_summary() is not None
+        except Exception:
+            return False
+
+
+def recover(path: str) -> dict:
+    """Rewrite an unfinished recording (its recorder killed: no summary, maybe a cut last
+    chunk) as a finished one that any MCAP reader opens, with every message up to the last
+    complete chunk. Returns {'messages': n, 'topics': n}; a finished file is left as it is."""
+    if finished(path):
+        topics = summary(path)
+        return {'messages': sum(v['count'] for v in topics.values()), 'topics': len(topics)}
+    tmp = path + '.recovering'
+    try:
+        n, topics = _rewrite(path, tmp)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+    os.replace(tmp, path)
+    return {'messages': n, 'topics': topics}
+
+
+def _rewrite(path: str, tmp: str) -> tuple[int, int]:
+    """Copy the complete records of ``path`` into a finished MCAP file ``tmp``."""
+    from mcap.records import Channel, Message, Schema
+    from mcap.writer import CompressionType, Writer
+    schemas, channels, n = {}, {}, 0
+    with _open(path) as src, open(tmp, 'wb') as dst:
+        writer = Writer(dst, compression=CompressionType.ZSTD)
+        writer.start(profile='ros2', library='eha_ros recording.recover')
+        for rec in _complete_records(src):
+            if isinstance(rec, Schema):
+                schemas[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
+            elif isinstance(rec, Channel):
+                channels[rec.id] = writer.register_channel(
+                    rec.topic, rec.message_encoding, schemas.get(rec.schema_id, 0),
+                    dict(rec.metadata))
+            elif isinstance(rec, Message) and rec.channel_id in channels:
+                writer.add_message(channels[rec.channel_id], rec.log_time, rec.data,
+                                   rec.publish_time, rec.sequence)
+                n += 1
+        writer.finish()
+    return n, len(channels)
+
+
+def _complete_records(src):
+    """The file's records (chunks opened) up to the first one cut short."""
+    from mcap.stream_reader import StreamReader
+    records = iter(StreamReader(src).records)
+    while True:
+        try:
+            rec = next(records)
+        except StopIteration:
+            return
+        except Exception:            # mcap raises many kinds at a cut (EndOfFile, CRC, ...)
+            return
+        yield rec
 
 
 def summary(path: str) -> dict:

@@ -38,14 +38,37 @@ def run_dir(base: str = 'out', name: str | None = None) -> str:
     return path
 
 
-def write_json(path: str, data, sort_keys: bool = False) -> None:
-    """Atomic: write a temporary file then rename, so readers never see half a file."""
+def write_json(path: str, data, sort_keys: bool = False, reserved: bool = False) -> None:
+    """Atomic: write a temporary file then rename, so readers never see half a file.
+    ``reserved``: the file was made by :func:`reserve_json`; when the disk is full (no room for
+    the temporary file) the JSON is written over the reservation in place instead."""
+    text = json.dumps(data, indent=2, default=_jsonable, sort_keys=sort_keys) + '\n'
     os.makedirs(os.path.dirname(path) or '.', exist_ok=True)
     tmp = path + '.tmp'
-    with open(tmp, 'w') as fh:
-        json.dump(data, fh, indent=2, default=_jsonable, sort_keys=sort_keys)
-        fh.write('\n')
-    os.replace(tmp, path)
+    try:
+        with open(tmp, 'w') as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except OSError:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        if not reserved:
+            raise
+        with open(path, 'r+b') as fh:         # blocks already allocated: no new space needed
+            raw = text.encode()
+            if len(raw) > os.fstat(fh.fileno()).st_size:
+                raise
+            fh.write(raw)
+            fh.truncate()
+
+
+def reserve_json(path: str, data, size: int = 1 << 18) -> None:
+    """Write ``data`` as JSON padded with blanks to ``size`` bytes: the run's final JSON then
+    has its disk space from the start (write_json(..., reserved=True)), full disk or not."""
+    text = json.dumps(data, default=_jsonable) + '\n'
+    os.makedirs(os.path.dirname(path) or '.', exist_ok=True)
+    with open(path, 'w') as fh:
+        fh.write(text + ' ' * max(0, size - len(text)))
 
 
 def write_csv(path: str, columns: dict) -> None:

@@ -184,8 +184,9 @@ def publish_counted(node, pub, msg, what: str) -> None:
 
 
 class StartGate:
-    """Lock-step start: tick 0 is held until every node named in ``names`` subscribes to every
-    topic under ``prefix`` that has a publisher (a recorder) and each of the node's ``own``
+    """Start gate of the plant side (lock-step and real time): tick 0 is held until every node
+    named in ``names`` subscribes to every topic under ``prefix`` that has a publisher (a
+    recorder) and each of the node's ``own``
     publishers has matched every subscription the graph shows on its topic (so a recording
     has the plant's own streams from the first ticks), seen for ``settle`` s in a row, or until
     ``timeout`` s of wall time after start-up (then a warning names what was missing). Other
@@ -221,11 +222,11 @@ class StartGate:
         self.since = None if missing else (self.since or now)
         if self.since is not None and now - self.since >= self.settle:
             self.open = True
-            self.node.get_logger().info(f'lock-step start: {", ".join(self.names)} subscribed '
+            self.node.get_logger().info(f'start gate: {", ".join(self.names)} subscribed '
                                         f'to every {self.prefix}* topic; stepping')
         elif now > self.deadline:
             self.open = True
             self.node.get_logger().warning(
-                f'lock-step start: still missing after {self.timeout:g} s: '
+                f'start gate: still missing after {self.timeout:g} s: '
                 f'{", ".join(missing[:6])}; stepping anyway')
         return self.open

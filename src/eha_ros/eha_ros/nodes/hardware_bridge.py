@@ -86,9 +86,9 @@ def make_node(params: dict):
             self.pub_state = self.create_publisher(ActuatorState, 'eha/state', qos)
             self.pub_diag = diag.publisher(self)
             self.pub_clock = self.create_publisher(Clock, '/clock', 10) if self.lockstep else None
-            self.start_gate = StartGate(self, p['bridge.lockstep_start_after'],
+            self.start_gate = StartGate(self, p['bridge.start_after'],
                                         self.state_topic.rsplit('/', 1)[0] + '/',
-                                        p['bridge.lockstep_start_timeout'],
+                                        p['bridge.start_timeout'],
                                         own=(self.pub_state,))
             self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
             self.create_subscription(ChannelSelect, 'eha/channel_select', self.on_select,
@@ -219,6 +219,8 @@ def make_node(params: dict):
 
         def realtime_loop(self):
             """Absolute deadlines at Ts (catch up, or resynchronise when far behind)."""
+            while self.running and not self.start_gate.poll():
+                time.sleep(0.02)                  # StartGate: a recorder first
             period = self.Ts
             deadline = time.monotonic()
             last = None

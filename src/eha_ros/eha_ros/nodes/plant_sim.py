@@ -93,19 +93,19 @@ def make_node(params: dict):
 
             self.running = True
             self.publish(self.now_stamp())
+            self.start_gate = StartGate(
+                self, self.p['sim_node.start_after'],
+                self.pub_state.topic_name.rsplit('/', 1)[0] + '/',
+                self.p['sim_node.start_timeout'], own=(self.pub_state, self.pub_truth))
             if self.lockstep:
                 self.last_publish = time.monotonic()
                 self.create_timer(0.01, self.lockstep_watchdog)
-                self.start_gate = StartGate(
-                    self, self.p['sim_node.lockstep_start_after'],
-                    self.pub_state.topic_name.rsplit('/', 1)[0] + '/',
-                    self.p['sim_node.lockstep_start_timeout'],
-                    own=(self.pub_state, self.pub_truth))
                 if not self.start_gate.open:
                     self.start_timer = self.create_timer(0.02, self.poll_start)
                 self.thread = None
             else:
-                # start the loop once the executor spins, so start-up is not counted as overruns
+                # start the loop once the executor spins (start-up is not counted as overruns)
+                # and the start gate is open (a recorder has every stream from tick 1)
                 self.thread = threading.Thread(target=self.realtime_loop, name='plant_loop',
                                                daemon=True)
                 self._starter = self.create_timer(0.05, self.start_loop)
@@ -232,6 +232,8 @@ def make_node(params: dict):
             self.pub_truth.publish(t)
 
         def start_loop(self):
+            if not self.start_gate.poll():
+                return
             self._starter.cancel()
             self.destroy_timer(self._starter)
             self.thread.start()

@@ -36,7 +36,7 @@ def make_node(params: dict):
                 extra.add('/diagnostics')
             self.output = p['recorder.output'] or default_output()
             self.sink = McapSink(self.output, p['recorder.compression'],
-                                 p['recorder.chunk_size'])
+                                 p['recorder.chunk_size'], on_error=self.on_write_error)
             self.started = time.monotonic()
             self.closed = False
             self.exit_code = 0
@@ -57,6 +57,11 @@ def make_node(params: dict):
             cid = self.sink.add_topic(topic, type_name, definition, stamped, meta)
             put, now = self.sink.put, time.time_ns
             return lambda data: put(cid, now(), data)
+
+        def on_write_error(self, text: str):
+            """Writer thread, once: the recording stopped (disk full): say so now."""
+            self.get_logger().error(f'recorder: {text}: recording stopped')
+            self.publish_diagnostics()
 
         def counts(self) -> dict:
             return {self.sink.topics[c]: self.sink.received[c] for c in self.sink.topics}

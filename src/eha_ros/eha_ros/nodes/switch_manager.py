@@ -20,12 +20,16 @@ from itertools import islice
 from ..core.redundancy import ChannelSample, EventLog, SwitchManager
 from ..core.redundancy.params import SCHEMA
 from ..core.stats import Counters, LoopStats
+from ..core.supervisor import LoopSupervisor, SupervisorParams
 from . import diag
 from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
 
 
 def _finite(*values) -> bool:
     return all(math.isfinite(v) for v in values)
+
+
+SUPERVISOR_CHECK = 0.02      # [s] wall-clock period of the supervisor's stall check
 
 
 def make_node(params: dict):
@@ -60,6 +64,9 @@ def make_node(params: dict):
             self.sent_select = None
             self.sent_status = None
             self.logged = 0
+            realtime = not self.get_parameter('use_sim_time').value
+            self.sup = LoopSupervisor(SupervisorParams.from_params(p, realtime))
+            self.sup_reported = None
             self.pub_select = self.create_publisher(ChannelSelect, 'eha/channel_select',
                                                     latched_qos())
             self.pub_status = self.create_publisher(RedundancyStatus, 'eha/redundancy',
@@ -74,6 +81,10 @@ def make_node(params: dict):
             self.create_service(SwitchChannel, 'eha/switch_channel', self.on_switch)
             self.create_timer(p['switch.node.status_period'], self.on_status_timer)
             self.create_timer(p['switch.node.diagnostics_period'], self.publish_diagnostics)
+            from rclpy.clock import Clock, ClockType
+            # wall time, also in lock-step: a stalled loop stops the simulated clock
+            self.create_timer(SUPERVISOR_CHECK, self.on_supervisor_timer,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
             self.Select, self.Status = ChannelSelect, RedundancyStatus
             self.flush()
             self.get_logger().info(
@@ -89,6 +100,8 @@ def make_node(params: dict):
             self.speed_ref = float(msg.motor_speed_ref)
             self.cmd_seq = int(msg.seq)
             self.refs.append((self.cmd_seq, self.speed_ref))
+            self.sup.command(self.cmd_seq, self.speed_ref, time.monotonic())
+            self.supervise()
 
         def on_estimate(self, msg):
             if not _finite(msg.innovation):
@@ -97,9 +110,12 @@ def make_node(params: dict):
                 return
             self.innovation = float(msg.innovation)
             self.estimate_ok = not (msg.stale or msg.update_skipped or msg.sensor_fault)
+            self.sup.estimate(int(msg.seq), msg.update_skipped and not msg.sensor_fault,
+                              msg.stale, time.monotonic())
+            self.supervise()
             if SAFE.position_fault(msg.consistency):
                 with self.lock:
-                    entered = self.mgr.position_fault(SAFE.manager_reason(msg.consistency))
+                    entered = self.mgr.safe_state(SAFE.manager_reason(msg.consistency))
                 if entered:
                     self.c.bump('position_faults')
                     self.flush()                 # the lock goes out now, logged once
@@ -117,7 +133,8 @@ def make_node(params: dict):
             if self.last_seq is not None and msg.seq > self.last_seq + 1:
                 self.c.bump('lost_states', int(msg.seq - self.last_seq - 1))
             self.last_seq = msg.seq
-            self.last_state_time = time.monotonic()
+            self.last_state_time = now = time.monotonic()
+            self.sup.state(int(msg.seq), now)
             # the loop is closed (and the speed reference known) only while commands answer
             # recent states (a stale command is zeroed in the plant/bridge, unseen from here)
             fresh = self.cmd_seq is not None and \
@@ -145,16 +162,49 @@ def make_node(params: dict):
                 self.c.bump('states_without_fresh_command')
             with self.lock:
                 self.mgr.update(s, int(msg.seq))
+            self.supervise()
             self.flush()
 
         def on_switch(self, req, resp):
             with self.lock:
+                was_safe = self.mgr.name == 'FAILED_SAFE'
                 ok, text = self.mgr.request(int(req.channel), req.reason)
+                if ok and was_safe and self.sup.trip is not None:
+                    self.sup.reset(time.monotonic())      # the operator left the safe state
+                    self.sup_reported = None
             resp.success, resp.message = bool(ok), text
             self.c.bump('switch_requests' if ok else 'switch_requests_refused')
             self.get_logger().info(f'switch_channel {req.channel} ({req.reason!r}): {text}')
             self.flush()
             return resp
+
+        # ---- loop supervisor ----
+        def on_supervisor_timer(self):
+            self.sup.check(time.monotonic())
+            self.supervise()
+
+        def supervise(self):
+            """A new supervisor trip: the safe state (latched like a position fault), one ERROR
+            line, ERROR on /diagnostics at once."""
+            trip = self.sup.trip
+            if trip is None or trip is self.sup_reported:
+                return
+            self.sup_reported = trip
+            with self.lock:
+                entered = self.mgr.safe_state(f'loop supervisor: {trip.message}')
+            self.c.bump('supervisor_trips')
+            self.get_logger().error(f'loop supervisor ({trip.kind}): {trip.message}; '
+                                    f'{"safe state " + self.p["switch.safe_mode"] if entered else "already in the safe state"}')
+            self.flush()
+            self.publish_supervisor()
+
+        @diag.reader
+        def publish_supervisor(self):
+            trip = self.sup.trip
+            values = dict(self.sup.values(), seq=trip.seq if trip else self.last_seq or 0)
+            diag.publish(self, self.pub_diag, 'supervisor', values,
+                         diag.ERROR if trip else diag.OK,
+                         f'{trip.kind}: {trip.message}' if trip else 'ok')
 
         # ---- outputs ----
         def flush(self):
@@ -229,18 +279,18 @@ def make_node(params: dict):
                           'state_stale': self.state_stale, 'armed': self.armed,
                           'events': len(mgr.events),
                           'last_event': mgr.events[-1].line() if mgr.events else ''}
-                name = mgr.name
+                name, reason = mgr.name, mgr.reason
             values.update(self.c)
             values.update(self.loop.values())
             if name == 'FAILED_SAFE':
-                level, text = diag.ERROR, 'both channels failed: safe state ' + \
-                    self.p['switch.safe_mode']
+                level, text = diag.ERROR, f'safe state {self.p["switch.safe_mode"]}: {reason}'
             elif name == 'DEGRADED' or self.state_stale:
                 level, text = diag.WARN, ('no redundancy left' if name == 'DEGRADED'
                                           else 'no /eha/state')
             else:
                 level, text = diag.OK, name
             diag.publish(self, self.pub_diag, 'redundancy', values, level, text)
+            self.publish_supervisor()
 
     return SwitchManagerNode()
 

@@ -18,7 +18,7 @@ import sys
 import threading
 import time
 
-from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds
+from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
 from ..core.params import default_config_dir
 from ..core.report import run_dir
 
@@ -212,6 +212,7 @@ def run_nodes(args, over: dict, out: str) -> dict:
         os.killpg(sweep.pid, signal.SIGINT)
         sweep.wait(timeout=60)
     finally:
+        stopping()
         if sweep.poll() is None:
             os.killpg(sweep.pid, signal.SIGKILL)
         with open(os.path.join(logs, 'sweep.log'), 'w') as fh:

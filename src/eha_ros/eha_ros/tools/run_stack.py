@@ -19,11 +19,18 @@ import os
 import sys
 import time
 
-from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds
+from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
 from ..core.params import default_config_dir
-from ..core.report import run_dir, write_json
+from ..core.report import reserve_json, run_dir, write_json
 
 LOOP = ('estimator', 'controller', 'switch_manager')
+# an ERROR from these ends the run: the loop supervisor has put the actuator in its safe state
+# (switch_manager: supervisor), the recording is failing (recorder: mcap)
+STOP_ON_ERROR = {'switch_manager: supervisor': 'loop supervisor', 'recorder: mcap': 'recording'}
+# [s] of wall time without any /diagnostics from a node that published before: it is stopped
+# (SIGSTOP) or hung. Every node publishes at least once a second (of sim time in lock-step,
+# which may run slower than the wall clock on a loaded machine)
+SILENT_AFTER = {'realtime': 5.0, 'lockstep': 20.0}
 PLANT_NODE = {'sim': 'plant_sim', 'bridge': 'hardware_bridge'}
 
 
@@ -195,6 +202,11 @@ def run(args, signals=()) -> int:
     try:
         refuse_second_stack(monitor, 'scripts/run_stack --domain-id N')
         out = run_dir(args.out, args.name)
+        try:                    # its room on the disk now: written at the end, disk full or not
+            reserve_json(os.path.join(out, 'stack.json'), {'stop_reason': 'running'})
+        except OSError as err:
+            raise UsageError(f'{out}: cannot write the run\'s stack.json: '
+                             f'{err.strerror or err}') from None
     except BaseException:
         monitor.close()
         raise
@@ -228,12 +240,21 @@ def run(args, signals=()) -> int:
             for name, t, message in monitor.new_errors(seen):
                 print(f'run_stack: {max(0.0, t - t0):6.1f} s: ERROR {name}: {message}',
                       flush=True)
+                if name in STOP_ON_ERROR and reason == 'duration':
+                    reason = f'{STOP_ON_ERROR[name]}: {message}'
+            if reason != 'duration':
+                break
             dead = stack.dead()
             if 'sweep' in dead and dead['sweep'] == 0 and len(dead) == 1:
                 reason = 'sweep finished'
                 break
             if dead:
                 reason = 'node exited: ' + ', '.join(f'{n} ({c})' for n, c in dead.items())
+                break
+            silent = monitor.silent(SILENT_AFTER[args.mode])
+            if silent:
+                reason = 'no /diagnostics from ' + ', '.join(
+                    f'{n} for {s:.0f} s' for n, s in silent.items()) + ' (stopped or hung)'
                 break
             if args.duration is not None and now - t0 >= args.duration:
                 break
@@ -243,6 +264,7 @@ def run(args, signals=()) -> int:
                       flush=True)
     except KeyboardInterrupt:
         reason = 'interrupted' + _signal_name(signals)
+    stopping()
     elapsed = time.monotonic() - t0
     cpu_share = cpu.read()
     diagnostics = monitor.snapshot()
@@ -250,13 +272,23 @@ def run(args, signals=()) -> int:
               dict(monitor.errors).items()}      # before the stop: shutdown is not a fault
     results = stack.stop()
     monitor.close()
+    if stack.recovered is not None:
+        print(f'run_stack: the recorder did not finish {stack.record}: ' + (
+            stack.recovered['error'] if 'error' in stack.recovered else
+            f'recovered {stack.recovered["messages"]} messages on '
+            f'{stack.recovered["topics"]} topics into a finished file'), flush=True)
     codes = {n: rc for n, (rc, _) in results.items()}
     summary = {'mode': args.mode, 'structure': p['structure'], 'plant': p['plant'],
                'processes': {n: ' '.join(c) for n, c in stack.commands().items()},
                'stop_reason': reason, 'wall_s': elapsed, 'exit_codes': codes,
-               'errors': errors,
+               'errors': errors, 'recording_recovered': stack.recovered,
                'cpu_share': cpu_share, 'diagnostics': diagnostics}
-    write_json(os.path.join(out, 'stack.json'), summary, sort_keys=True)
+    try:
+        write_json(os.path.join(out, 'stack.json'), summary, sort_keys=True, reserved=True)
+    except OSError as err:
+        print(f'run_stack: FAILED: cannot write {out}/stack.json: {err.strerror or err}',
+              file=sys.stderr)
+        return 1
     print(progress_line(elapsed, next((v for k, v in sorted(diagnostics.items())
                                        if k.startswith(f'{p["plant"]}: ')), {}), cpu_share))
     bad = {n: c for n, c in codes.items() if c not in (0, None)}

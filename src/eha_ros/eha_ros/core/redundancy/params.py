@@ -87,6 +87,26 @@ NODE = Schema('switch_manager', [
           doc='no /eha/state for this long is reported on /diagnostics'),
     Param(S + 'node.log_dir', 'str', '', 'out/redundancy',
           doc='folder of the switch-event log events.jsonl ("" = no file)'),
+    # the loop supervisor (core.supervisor): any condition -> the safe state, ERROR
+    Param(S + 'supervisor.stall_timeout', 'float', 's', 0.2, 0.01, 10.0,
+          doc='real time: a loop stream (state, estimate, command) whose seq does not advance '
+              'for this long (wall time) is a stalled node'),
+    Param(S + 'supervisor.lockstep_stall_timeout', 'float', 's', 5.0, 0.1, 600.0,
+          doc='lock-step: the same in wall time (a lock-step loop waits for its slowest node)'),
+    Param(S + 'supervisor.start_timeout', 'float', 's', 30.0, 0.1, 600.0,
+          doc='the first command must follow the first state within this (wall time)'),
+    Param(S + 'supervisor.window', 'float', 's', 1.0, 0.01, 60.0,
+          doc='window of the unanswered-ticks and limit-cycle checks'),
+    Param(S + 'supervisor.max_unanswered', 'float', '', 0.02, 0.0, 1.0,
+          doc='real time: share of the window\'s ticks without command(k) before state(k+1)'),
+    Param(S + 'supervisor.reject_time', 'float', 's', 0.05, 0.001, 10.0,
+          doc='estimates in a row made without the position measurement (rejected)'),
+    Param(S + 'supervisor.saturation', 'float', '', 0.95, 0.1, 1.0,
+          doc='a speed command at least this share of plant.drive.omega_max is saturated'),
+    Param(S + 'supervisor.cycle_share', 'float', '', 0.2, 0.0, 1.0,
+          doc='limit cycle: saturated on at least this share of the window ...'),
+    Param(S + 'supervisor.cycle_reversals', 'int', '', 4, 1, 10000,
+          doc='... with at least this many sign reversals between saturated commands'),
 ])
 
 def check(p: dict) -> None:

@@ -218,9 +218,10 @@ class SwitchManager:
         self._event('safe', from_state, self.active, self.active,
                     f'{why}; safe state {self.safe_mode}')
 
-    def position_fault(self, why: str) -> bool:
-        """The position feedback cannot be trusted (core.safe_state): the safe state, latched
-        like both couples failed. Returns True when this call entered it."""
+    def safe_state(self, why: str) -> bool:
+        """The loop cannot be trusted (a position fault, core.safe_state; the loop supervisor,
+        core.supervisor): the safe state, latched like both couples failed. Returns True when
+        this call entered it."""
         if self.state == FAILED_SAFE:
             return False
         self._safe(why)
