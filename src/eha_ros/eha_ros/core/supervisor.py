@@ -161,8 +161,9 @@ class LoopSupervisor:
                 if self.seq[down] < self.seq[up]:
                     node, name = who, down
                     break
+            silent_s = now - (self.last[name] or self.judged_from)
             self._trip(STALLED, f'{node} stalled: no new {name} for '
-                                f'{now - self.last[name]:.2f} s (newest seq {self.seq[name]}, '
+                                f'{silent_s:.2f} s (newest seq {self.seq[name]}, '
                                 f'state seq {self.seq["state"]})', now)
 
     def _progress(self, name: str, seq: int, now: float):

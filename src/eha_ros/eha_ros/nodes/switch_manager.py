@@ -193,8 +193,9 @@ def make_node(params: dict):
             with self.lock:
                 entered = self.mgr.safe_state(f'loop supervisor: {trip.message}')
             self.c.bump('supervisor_trips')
-            self.get_logger().error(f'loop supervisor ({trip.kind}): {trip.message}; '
-                                    f'{"safe state " + self.p["switch.safe_mode"] if entered else "already in the safe state"}')
+            then = f'safe state {self.p["switch.safe_mode"]}' if entered else \
+                'already in the safe state'
+            self.get_logger().error(f'loop supervisor ({trip.kind}): {trip.message}; {then}')
             self.flush()
             self.publish_supervisor()
 
@@ -283,7 +284,7 @@ def make_node(params: dict):
             values.update(self.c)
             values.update(self.loop.values())
             if name == 'FAILED_SAFE':
-                level, text = diag.ERROR, f'safe state {self.p["switch.safe_mode"]}: {reason}'
+                level, text = diag.ERROR, reason      # why; safe state <switch.safe_mode>
             elif name == 'DEGRADED' or self.state_stale:
                 level, text = diag.WARN, ('no redundancy left' if name == 'DEGRADED'
                                           else 'no /eha/state')
