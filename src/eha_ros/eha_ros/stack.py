@@ -119,19 +119,14 @@ class Stack:
         self.live = live
         self.config_dir = config_dir
         self.extra = {k: list(v) for k, v in (extra or {}).items()}
-        if lockstep:           # the plant steps per command and publishes /clock; others follow it
-            for name in self.nodes:
-                self.extra.setdefault(name, [])
-                pre = LOCKSTEP_PREFIX.get(name)
-                if pre is None:
-                    self.extra[name] += ['-p', 'use_sim_time:=true']
-                    continue
-                self.extra[name] += ['-p', f'{name}:{pre}.lockstep:=true']
-        for name in self.nodes if record else ():
+        for name in self.nodes:
             pre = LOCKSTEP_PREFIX.get(name)
-            if pre:         # the plant side holds tick 0 until the recorder has subscribed
-                self.extra.setdefault(name, []).extend(
-                    ['-p', f'{name}:{pre}.start_after:=[recorder]'])
+            args = self.extra.setdefault(name, [])
+            if lockstep:       # the plant steps per command and publishes /clock; others follow it
+                args += ['-p', f'{name}:{pre}.lockstep:=true'] if pre else \
+                    ['-p', 'use_sim_time:=true']
+            if pre and record:  # the plant side holds tick 0 until the recorder has subscribed
+                args += ['-p', f'{name}:{pre}.start_after:=[recorder]']
         if record:
             self.extra.setdefault('recorder', [])
             self.extra['recorder'] += ['-p', f'recorder:recorder.output:={record}']

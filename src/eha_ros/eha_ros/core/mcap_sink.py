@@ -116,7 +116,7 @@ class McapSink:
                                      log_time if pub is None else pub, sequence=seq & 0xFFFFFFFF)
             self.written[channel] += 1
         except (OSError, ValueError) as err:
-            self._failed(f'{self.path}: write failed: {getattr(err, "strerror", None) or err}')
+            self._failed(err)
 
     def _flush(self):
         """Completed chunks to the OS at once (a killed recorder loses at most the chunk being
@@ -125,10 +125,10 @@ class McapSink:
             try:
                 self._file.flush()
             except OSError as err:
-                self._failed(f'{self.path}: write failed: {err.strerror or err}')
+                self._failed(err)
 
-    def _failed(self, text: str):
-        self.error = text
+    def _failed(self, err: Exception):
+        self.error = text = f'{self.path}: write failed: {getattr(err, "strerror", None) or err}'
         if self._on_error is not None:
             self._on_error(text)
 

@@ -92,23 +92,15 @@ def read_records(path: str, topics: Iterable[str] | None = None) -> dict[str, li
     return dict(out)
 
 
-def finished(path: str) -> bool:
-    """The file has its summary (the recorder closed it)."""
-    from mcap.reader import SeekingReader
-    with _open(path) as fh:
-        try:
-            return SeekingReader(fh).get_summary() is not None
-        except Exception:
-            return False
-
-
 def recover(path: str) -> dict:
     """Rewrite an unfinished recording (its recorder killed: no summary, maybe a cut last
     chunk) as a finished one that any MCAP reader opens, with every message up to the last
     complete chunk. Returns {'messages': n, 'topics': n}; a finished file is left as it is."""
-    if finished(path):
-        topics = summary(path)
+    try:
+        topics = summary(path)               # finished: nothing to do
         return {'messages': sum(v['count'] for v in topics.values()), 'topics': len(topics)}
+    except RecordingError:
+        pass
     tmp = path + '.recovering'
     try:
         n, topics = _rewrite(path, tmp)
@@ -150,10 +142,8 @@ def _complete_records(src):
     while True:
         try:
             rec = next(records)
-        except StopIteration:
-            return
-        except Exception:            # mcap raises many kinds at a cut (EndOfFile, CRC, ...)
-            return
+        except Exception:            # StopIteration at the end; at a cut, mcap raises many
+            return                   # kinds (EndOfFile, CRC, ...)
         yield rec
 
 
