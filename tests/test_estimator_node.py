@@ -142,6 +142,10 @@ def test_nan_measurement_predict_only_counted_and_reported(ros_node):
         d = probe.diags[-1]
         assert int(d['estimator_skipped_updates']) >= len(answered)
         assert int(d['rejected_states']) >= len(answered)
+        # the measured noise levels (core.estimator.noise_level): the crafted position has the
+        # datasheet's white sigma (10 um; no Gauss-Markov part: 0.99), its pressures none
+        assert 0.85 < float(d['noise_level_position']) < 1.15, d
+        assert float(d['noise_level_pressure']) == 0.5, d     # bottom of adapt_range
     finally:
         stop.set()
         if th is not None:

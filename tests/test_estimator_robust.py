@@ -145,7 +145,9 @@ def test_estimate_stays_near_the_sensor_beyond_the_adaptation_range():
     its sigma (adapt.disagree_noise), so the estimate stays near the sensor, the loop holds on
     it, and the monitor reports it (MODEL / DISAGREE) -- loud, not a silent runaway. (Held
     within 0.55 mm; the pump then runs at 670 of its 838 rad/s to feed the leakage. x60 would
-    need 1000 rad/s: no actuator of this family can hold that.)"""
+    need 1000 rad/s: no actuator of this family can hold that. |z - x_hat| after 0.6 s: 390 um
+    with R at the datasheet, 411 um with the measured noise level, which reads the pump's
+    pressure ripple here as 3 % more pressure noise.)"""
     s = stack([40, 1, 1, 1, 1])
     n = 3000
     t = np.arange(n) * 1e-3
@@ -158,9 +160,10 @@ def test_estimate_stays_near_the_sensor_beyond_the_adaptation_range():
           f'after 2 s), max |z - x_hat| after 0.6 s {np.abs(xm - xh)[late].max() * 1e6:.0f} um, '
           f'lambda {kf.leakage_correction:.2f}, epsilon {kf.external_leakage_correction:.2f}, '
           f'edge {kf.edge}, verdict {adapt.VERDICTS[s.estimator.consistency]}')
-    assert np.abs(xm - xh)[late].max() < 0.4e-3
+    assert np.abs(xm - xh)[late].max() < 0.45e-3
     assert np.abs(x[t > 2.0]).max() < 0.6e-3
-    assert kf.edge or kf.leakage_correction > kf.lam_range[1] - 1.5   # at (near) its edge
+    assert (kf.edge or kf.leakage_correction > kf.lam_range[1] - 1.5 or   # a leakage path
+            kf.external_leakage_correction > kf.eps_range[1] - 1.5)      # at (near) its edge
     assert s.estimator.consistency in (adapt.MODEL, adapt.DISAGREE)
 
 

@@ -169,6 +169,12 @@ def make_node(params: dict):
             bad = self.stale or self.est.detector.code or self.c.get('rejected_states', 0)
             level = diag.WARN if bad else diag.OK
             msg = 'ok' if level == diag.OK else 'stale, sensor fault or measurements rejected'
+            levels = self.est.noise_levels
+            if levels is not None:
+                values['noise_level_position'], values['noise_level_pressure'] = levels[:2]
+                if levels[2] and level == diag.OK:
+                    level, msg = diag.WARN, ('sensor noise at the top of '
+                                             'estimator.noise.adapt_range: R no longer matches it')
             if adapt.alarm(self.est.consistency):
                 level = diag.ERROR
                 msg = (f'{values["consistency"]}: ' +

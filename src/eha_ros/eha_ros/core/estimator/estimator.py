@@ -20,6 +20,7 @@ from ..stats import Counters
 from . import adapt
 from . import fault_detector as fd
 from . import kernels
+from . import noise_level
 from .chamber_kf import ChamberKF, Circuit
 from .model_kf import HydroMech, ModelKF
 from .pva import PvaKF
@@ -148,6 +149,8 @@ class Estimator:
         self.q_x, self.q_x_disagree = params[m + 'q'][0], params[m + 'q_x_disagree']
         self.b_dis = params[e + 'noise.position_gm_sigma']
         self.monitor_s = np.zeros(adapt.NMS)
+        self.noise_k = self._noise_constants(params, pp) if self.chambers else None
+        self.noise_s = np.zeros(noise_level.NNS)
         self.chinniah = None
         if params[e + 'chinniah.enabled']:
             from .chinniah import Chinniah3, Chinniah4
@@ -155,6 +158,23 @@ class Estimator:
         self.counters = Counters()
         self.max_gap_ticks = 1000       # a longer gap is predicted over at most 1 s
         self.reset()
+
+    def _noise_constants(self, p: dict, pp):
+        """noise_level constants from the filter's sensor model, None when not adapting."""
+        e, kf = 'estimator.noise.', self.kf
+        if not p[e + 'adapt']:
+            return None
+        sig, gm_sig = p[e + 'position_sigma'], p[e + 'position_gm_sigma']
+        a = math.exp(-2.0 * math.pi * p[e + 'position_gm_corner'] * self.Ts)
+        with_gm = kf.i_gm >= 0
+        d_x = noise_level.second_difference_power(sig, gm_sig, a, pp.position_resolution)
+        d_p = noise_level.second_difference_power(p[e + 'pressure_sigma'], 0.0, 0.0, 0.0)
+        lo, hi = p[e + 'adapt_range'][:2]
+        return noise_level.constants(
+            self.Ts, p[e + 'adapt_time'], lo, hi, d_x, d_p, kf.R[0, 0],
+            kf.R[1, 1] if kf.with_pressure else 0.0,
+            kf.Q[kf.i_gm, kf.i_gm] if with_gm else 0.0, kf.i_gm,
+            p[e + 'adapt_quiet_velocity'] * pp.A_p / pp.D_p)
 
     def reset(self):
         self.started = False
@@ -165,6 +185,8 @@ class Estimator:
         self.pd_filt = 0.0          # its low-pass (model input)
         self.detector.reset()
         self.monitor_s[:] = 0.0
+        if self.noise_k is not None:
+            noise_level.reset(self.noise_k, self.noise_s, self.kf.R, self.kf.R1, self.kf.Q)
         self.updates = 0
 
     # ------------------------------------------------------------------ checks
@@ -222,6 +244,8 @@ class Estimator:
             self.started = True
             self.detector.z_prev = position
             return self._result(0.0, 0.0, False, ','.join(reasons), 0)
+        if ticks > 1:
+            noise_level.gap(self.noise_s)
         for _ in range(min(max(int(ticks), 1), self.max_gap_ticks) - 1):
             self._predict(self.omega_prev)
         self._predict(w)
@@ -229,6 +253,7 @@ class Estimator:
             self.pd_filt += self.alpha_pd * (self.pd_meas - self.pd_filt)
         fault_before = self.detector.code
         if not pos_ok:
+            noise_level.gap(self.noise_s)
             self.detector.tick_without_sample()
             self.counters.bump('skipped_updates')
             return self._result(0.0, 0.0, True, ','.join(reasons), 0)
@@ -237,12 +262,17 @@ class Estimator:
             self.counters.bump('skipped_updates')
             self.counters.bump('isolated_updates')
             reasons.append('sensor_fault')
+            noise_level.gap(self.noise_s)
             y, S = self.kf.innovation_only(position)
             if pr_ok and self.use_pressure:
                 self.kf.update_pressures(pressure_a, pressure_b)   # the pressures still count
             self.detector.update(position, y, S)
             self._monitor(position)
             return self._result(y, y * y / S, True, ','.join(reasons), 0)
+        if self.noise_k is not None:
+            kf = self.kf
+            noise_level.update(self.noise_k, self.noise_s, position, pressure_a, pressure_b,
+                               pr_ok and self.use_pressure, w, kf.R, kf.R1, kf.Q)
         y, S, nis, m = self.kf.update(position, *((pressure_a, pressure_b)
                                                   if pr_ok and self.use_pressure else ()))
         self.updates += 1
@@ -273,6 +303,16 @@ class Estimator:
         return int(self.monitor_s[adapt.MS_VERDICT])
 
     @property
+    def noise_levels(self):
+        """Measured noise level (x the datasheet's sigma) of the position and the pressure
+        sensors and whether one sits on the top of its range (noise_level); None when not
+        measured."""
+        if self.noise_k is None:
+            return None
+        sx, sp = (float(self.noise_s[i]) for i in (noise_level.NS_SX, noise_level.NS_SP))
+        return sx, sp, max(sx, sp) >= self.noise_k[noise_level.NK_HI]
+
+    @property
     def safe_state_required(self) -> bool:
         """Filter and sensor disagree beyond the sensor's band, or the sensor is faulty: the
         nodes' cue for the safe state (adapt.monitor, adapt.safe_state)."""
@@ -288,6 +328,7 @@ class Estimator:
                                self.w_fric, None if p_last is None else p_last.copy(),
                                None if p_last is None else self.kf.fs.copy())
             self._predict(self.omega_prev)
+        noise_level.gap(self.noise_s)
         self.detector.tick_without_sample()
         return self._result(0.0, 0.0, True, 'stale', 0)
 

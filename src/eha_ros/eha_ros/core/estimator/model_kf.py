@@ -174,6 +174,7 @@ class MeasuredKF(kernels.StateView):
             return 0.0
         z = np.array(self.pressure_z(p_a, p_b))
         m = len(z)
+        self.Rp[:] = self.R[1:, 1:]                 # R may be rescaled (noise_level)
         y, S = np.zeros(m), np.zeros((m, m))
         return float(kernels.update_gated(self.x, self.P, self.Hp, self.Rp, z, y, S, self._ws,
                                           getattr(self, 'i_frozen', self.n), 0.0,

@@ -135,6 +135,16 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'noise.position_gm_corner', 'float', 'Hz', 1.0, 1e-3, 100.0),
     Param(E + 'noise.pressure_sigma', 'float', 'Pa', 0.316 * BAR, 1.0, 1e7,
           doc='one pressure sensor sigma; p_D gets twice its variance'),
+    Param(E + 'noise.adapt', 'bool', '', True,
+          doc='chambers: measure the position and pressure sensors\' noise level online and '
+              'scale R (and the Gauss-Markov state\'s q) by it (core.estimator.noise_level)'),
+    Param(E + 'noise.adapt_time', 'float', 's', 5.0, 0.01, 1e6,
+          doc='memory of the noise-level measurement'),
+    Param(E + 'noise.adapt_range', 'float[]', '', [0.5, 3.0], 0.01, 100.0, min_len=2,
+          doc='range of the measured noise level, relative to the sigmas above [lo, hi]'),
+    Param(E + 'noise.adapt_quiet_velocity', 'float', 'm/s', 0.02, 0.0, 10.0,
+          doc='the level is measured only while the pump-flow velocity D_p |omega| / A_p is '
+              'below this (faster, the loop carries motion the filter does not follow)'),
     # PVA filter, eq. 4.30-4.34
     Param(E + 'pva.W', 'float', 'm^2/s^5', 100.0, 1e-12, 1e12,
           doc='jerk noise intensity W, eq. 4.32'),

@@ -16,6 +16,7 @@ from numba import njit
 from ..jit_cache import drop_stale
 from . import adapt
 from . import fault_detector as fd
+from . import noise_level
 from .kernels import predict, update_gated, workspace_size
 
 drop_stale(__file__)
@@ -38,7 +39,9 @@ K_MON = 54             # adapt.NMK entries: the consistency monitor's constants
 K_STRIBECK, K_IPHI, K_PHILO, K_PHIHI, K_IEPS, K_EPSLO, K_EPSHI = 58, 59, 60, 61, 62, 63, 64
 K_IMOVED, K_MOVEDZ = 65, 66
 K_FK = 67              # adapt.NFK entries: the friction model's constants
-NK = K_FK + adapt.NFK
+K_NADAPT = K_FK + adapt.NFK     # 1: the sensors' noise level is measured (noise_level)
+K_NL = K_NADAPT + 1    # noise_level.NNK entries: its constants
+NK = K_NL + noise_level.NNK
 assert K_MON + adapt.NMK == K_STRIBECK
 # state
 E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
@@ -54,7 +57,8 @@ E_YPREV, E_STEPPED = 25, 26   # fault detector: last innovation, run began with 
 E_CLIPPED = 27         # chamber filter: updates in a row that clipped a parameter
 E_MON = 28             # adapt.NMS entries: the consistency monitor's state
 E_FS = E_MON + adapt.NMS   # adapt.NFS entries: the friction model's state
-NE = E_FS + adapt.NFS
+E_NL = E_FS + adapt.NFS    # noise_level.NNS entries: the noise level's state
+NE = E_NL + noise_level.NNS
 CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
 
 
@@ -105,6 +109,10 @@ def pack(est):
     k[K_QX], k[K_QXD], k[K_BDIS] = est.q_x, est.q_x_disagree, est.b_dis
     k[K_MON:K_MON + adapt.NMK] = est.monitor_k
     e[E_MON:E_MON + adapt.NMS] = est.monitor_s
+    if est.noise_k is not None:
+        k[K_NADAPT] = 1.0
+        k[K_NL:K_NL + noise_level.NNK] = est.noise_k
+    e[E_NL:E_NL + noise_level.NNS] = est.noise_s
     k[K_JUMP], k[K_JUMP_N] = d.jump_threshold, d.jump_debounce
     k[K_STUCK_N], k[K_STUCK_TOL] = d.stuck_samples, d.stuck_tolerance
     k[K_DRIFT_K], k[K_DRIFT_H], k[K_DRIFT_N] = d.drift_k, d.drift_h, d.drift_debounce
@@ -158,6 +166,7 @@ def unpack(est, e) -> None:
     d.code = int(e[E_CODE])
     d.y_prev, d.stepped = float(e[E_YPREV]), bool(e[E_STEPPED] > 0.5)
     est.monitor_s[:] = e[E_MON:E_MON + adapt.NMS]
+    est.noise_s[:] = e[E_NL:E_NL + noise_level.NNS]
     if est.chambers:
         kf = est.kf
         kf.edge = int(e[E_EDGE])
@@ -315,6 +324,9 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
     iu = -1
     if k[K_CHAMBERS] > 0.5:
         iu = adapt.leakage_unexcited(x, int(k[K_ILAM]), k[K_PEXC])
+    if k[K_NADAPT] > 0.5:
+        noise_level.update(k[K_NL:K_NL + noise_level.NNK], e[E_NL:E_NL + noise_level.NNS],
+                           position, pa, pb, pr_ok and use_p, w, R, R1, Q)
     if pr_ok and use_p:
         zm[0] = position
         if k[K_CHAMBERS] > 0.5:
