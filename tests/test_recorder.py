@@ -111,9 +111,8 @@ def test_unwritable_output_is_one_line(tmp_path):
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 COMPARED = ['/eha/state', '/eha/sim/truth', '/eha/estimate', '/eha/command']
 PLANT_OWN = ['/eha/state', '/eha/sim/truth']  # the plant's own streams: the gate waits for them
-# tick-locked reference steps (tick, position m); the first 1500 ticks leave the script time
-# to reach the controller while the lock-step plant already runs (a loaded machine delays the
-# match of a new publisher; seen once at 600 ticks)
+# tick-locked reference steps (tick, position m); the plant starts once the script reaches the
+# controller (run_recorded), the first 1500 ticks let the loop settle
 STEPS = [(1500, 0.002), (2200, -0.001)]
 HOLD_TICK = 1 << 40                         # "this reference holds until tick 2^40"
 
@@ -139,27 +138,54 @@ class Watch:
 
 
 def run_recorded(node, tmp_path, name, seed, ticks):
-    """Lock-step stack + recorder; scripted reference steps; stop after `ticks` states."""
+    """Lock-step stack + recorder; scripted reference steps; stop after `ticks` states.
+
+    The plant starts last, after the script's publisher has matched the controller (and the
+    recorder) and the script has been sent ten times over 0.2 s: a tick-locked reference that
+    reaches the controller after its tick is applied late, and the plant does not wait for
+    it (seen on the loaded CI machine: a reliable sample sent before the reader had matched
+    the writer came only with a later heartbeat, after the lock-step plant had passed tick
+    1500). Before the first tick the copies only queue up for their ticks; once the plant
+    runs, a copy of a passed tick would be applied at once, so the sending stops first."""
+    import threading
+
     from eha_msgs.msg import PositionReference
     from eha_ros.nodes.common import stream_qos
     path = str(tmp_path / f'{name}.mcap')
     watch = Watch(node)
     ref = node.create_publisher(PositionReference, '/eha/reference', stream_qos())
-    st = Stack(NODES, lockstep=True, record=path, log_dir=str(tmp_path / name),
-               extra={'plant_sim': ['-p', f'plant_sim:sim_node.seed:={seed}']}).start()
+    logs = str(tmp_path / name)
+    loop = Stack([n for n in NODES if n != 'plant_sim'], lockstep=True, record=path,
+                 log_dir=logs).start()
+    plant = None
+    stop = threading.Event()
+
+    def resend():
+        while not stop.is_set():
+            for k, x in STEPS + [(HOLD_TICK, STEPS[-1][1])]:
+                ref.publish(PositionReference(seq=k, position=x))
+            stop.wait(0.02)
+
+    sender = threading.Thread(target=resend, daemon=True)
     t0 = time.monotonic()
     try:
-        # controller and recorder subscribed: the whole script goes out at once, tick-locked.
-        # (The plant holds tick 0 until the recorder has every topic, sim_node.
-        # start_after; the steps leave the script 1500 ticks to arrive.)
         assert wait_for(lambda: ref.get_subscription_count() >= 2, 90), 'controller not up'
-        for k, x in STEPS + [(HOLD_TICK, STEPS[-1][1])]:
-            ref.publish(PositionReference(seq=k, position=x))
+        sender.start()
+        time.sleep(0.2)              # ten rounds of the script after the match
+        stop.set()
+        sender.join()
+        plant = Stack(['plant_sim'], lockstep=True, log_dir=logs, extra={'plant_sim': [
+            '-p', f'plant_sim:sim_node.seed:={seed}',
+            '-p', 'plant_sim:sim_node.start_after:=[recorder]']}).start()
         assert wait_for(lambda: watch.ticks() >= ticks, 120), f'stalled: {watch.counts}'
-        rec_pid = st.procs['recorder'].pid
+        rec_pid = loop.procs['recorder'].pid
         cpu, wall = cpu_seconds(rec_pid), time.monotonic() - t0
     finally:
-        res = st.stop(timeout=20)
+        stop.set()
+        if sender.is_alive():
+            sender.join()
+        res = plant.stop(timeout=20) if plant is not None else {}
+        res.update(loop.stop(timeout=20))
         node.destroy_publisher(ref)
     for n, (code, err) in res.items():
         assert 'Traceback' not in err, (n, err[-2000:])
