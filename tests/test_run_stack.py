@@ -132,6 +132,17 @@ def test_one_stack_per_domain_a_second_beside_it_and_sigterm_stops_cleanly(tmp_p
         assert r.returncode == 2 and len(lines) == 1, r.stderr
         assert 'another EHA stack runs on ROS domain' in lines[0] and '--domain-id' in lines[0]
         assert not (tmp_path / 'second').exists()
+        # discovery slower than the check before the start (a loaded machine): the check once
+        # its own loop runs refuses the same way, stops what it started, leaves no folder
+        r = subprocess.run([os.path.join(ROOT, 'scripts', 'run_stack'), '--out', str(tmp_path),
+                            '--name', 'late', '--duration', '3'], capture_output=True,
+                           text=True, timeout=120, env=dict(os.environ, EHA_DISCOVERY_WAIT='0'))
+        lines = [ln for ln in r.stderr.splitlines() if not ln.startswith('setup:')]
+        assert r.returncode == 2 and len(lines) == 1, r.stderr
+        assert 'another EHA stack runs on ROS domain' in lines[0]
+        assert ': started ' in r.stdout, r.stdout         # refused by the check after the start
+        assert not (tmp_path / 'late').exists()
+        assert first.running(0), first.lines
         other = (int(os.environ.get('ROS_DOMAIN_ID', '0')) + 37) % 100 + 1
         r, folder, summary = run_stack(tmp_path, '--duration', '3', '--domain-id', str(other))
         assert r.returncode == 0, r.stdout[-1500:] + r.stderr[-1500:]

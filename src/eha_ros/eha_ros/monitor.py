@@ -16,6 +16,15 @@ PLANT_TOPIC = '/eha/state'      # published by exactly one plant side per stack
 DISCOVERY_WAIT = 2.0            # [s] to see the publishers already on the domain
 
 
+def discovery_wait() -> float:
+    """DISCOVERY_WAIT, or EHA_DISCOVERY_WAIT seconds from the environment (tests set 0 to
+    reach the check made once the loop runs)."""
+    try:
+        return max(0.0, float(os.environ.get('EHA_DISCOVERY_WAIT', DISCOVERY_WAIT)))
+    except ValueError:
+        return DISCOVERY_WAIT
+
+
 def parse_value(text: str):
     """Diagnostic values travel as strings: numbers back to int/float, the rest as is."""
     for cast in (int, float):
@@ -139,12 +148,15 @@ class DiagMonitor:
             rclpy.try_shutdown()
 
 
-def refuse_second_stack(monitor: DiagMonitor, hint: str, wait: float = DISCOVERY_WAIT):
-    """UsageError (one line, exit 2) when a plant already publishes PLANT_TOPIC on this ROS
-    domain: two stacks on one domain would drive each other's nodes (states, commands, fault
-    injections and lock-step clocks mix). ``hint`` says how to start one beside it."""
-    names = monitor.publishers(PLANT_TOPIC, wait)
-    if names:
+def refuse_second_stack(monitor: DiagMonitor, hint: str, wait: float | None = None,
+                        own: int = 0):
+    """UsageError (one line, exit 2) when a plant other than our ``own`` (0 or 1) publishes
+    PLANT_TOPIC on this ROS domain: two stacks on one domain would drive each other's nodes
+    (states, commands, fault injections and lock-step clocks mix). ``hint`` says how to start
+    one beside it. Checked before the start (discovery may show a stack later than ``wait``
+    on a loaded machine) and again once our own loop runs (own=1, wait=0)."""
+    names = monitor.publishers(PLANT_TOPIC, discovery_wait() if wait is None else wait)
+    if len(monitor.node.get_publishers_info_by_topic(PLANT_TOPIC)) > own and names:
         raise UsageError(f'another EHA stack runs on ROS domain '
                          f'{os.environ.get("ROS_DOMAIN_ID", "0")} ({", ".join(names)} publishes '
                          f'{PLANT_TOPIC}): stop it, or run this one on a domain of its own: '

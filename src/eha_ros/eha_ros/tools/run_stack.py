@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import time
 
@@ -186,6 +187,21 @@ def progress_line(elapsed: float, loop: dict, cpu: dict) -> str:
             f'overruns {loop.get("overruns", 0)}; CPU {cpu_text}')
 
 
+def _refuse_late(stack, monitor, out: str) -> None:
+    """Our loop runs: a second plant on the domain now is another stack that discovery had
+    not shown before the start (a loaded machine): stop ours, drop its run folder (nothing
+    ran), and refuse as before the start."""
+    from ..monitor import refuse_second_stack
+    try:
+        refuse_second_stack(monitor, 'scripts/run_stack --domain-id N', wait=0.0, own=1)
+    except UsageError:
+        stopping()
+        stack.stop()
+        monitor.close()
+        shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
     fired = interrupt_on_signals()
@@ -225,6 +241,7 @@ def run(args, signals=()) -> int:
     try:
         reason = wait_for_loop(stack, monitor, p['plant'], args.start_timeout)
         if reason == 'duration':
+            _refuse_late(stack, monitor, out)
             print(f'run_stack: loop running after {time.monotonic() - t_start:.1f} s',
                   flush=True)
     except KeyboardInterrupt:
