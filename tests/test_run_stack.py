@@ -132,17 +132,6 @@ def test_one_stack_per_domain_a_second_beside_it_and_sigterm_stops_cleanly(tmp_p
         assert r.returncode == 2 and len(lines) == 1, r.stderr
         assert 'another EHA stack runs on ROS domain' in lines[0] and '--domain-id' in lines[0]
         assert not (tmp_path / 'second').exists()
-        # discovery slower than the check before the start (a loaded machine): the check once
-        # its own loop runs refuses the same way, stops what it started, leaves no folder
-        r = subprocess.run([os.path.join(ROOT, 'scripts', 'run_stack'), '--out', str(tmp_path),
-                            '--name', 'late', '--duration', '3'], capture_output=True,
-                           text=True, timeout=120, env=dict(os.environ, EHA_DISCOVERY_WAIT='0'))
-        lines = [ln for ln in r.stderr.splitlines() if not ln.startswith('setup:')]
-        assert r.returncode == 2 and len(lines) == 1, r.stderr
-        assert 'another EHA stack runs on ROS domain' in lines[0]
-        assert ': started ' in r.stdout, r.stdout         # refused by the check after the start
-        assert not (tmp_path / 'late').exists()
-        assert first.running(0), first.lines
         other = (int(os.environ.get('ROS_DOMAIN_ID', '0')) + 37) % 100 + 1
         r, folder, summary = run_stack(tmp_path, '--duration', '3', '--domain-id', str(other))
         assert r.returncode == 0, r.stdout[-1500:] + r.stderr[-1500:]
@@ -313,3 +302,39 @@ def test_processes_in_real_time_are_stopped_when_they_cannot_hold_the_loop(tmp_p
         assert summary['wall_s'] < 10
     else:
         assert summary['stop_reason'] == 'duration' and lost < 0.05, summary['stop_reason']
+
+
+def test_second_plant_seen_after_the_start_is_refused(tmp_path, monkeypatch):
+    """Discovery slower than the check before the start (a loaded machine): once its own loop
+    runs, run_stack looks again; a second /eha/state publisher stops what it started, removes
+    its run folder and refuses with the same line. Our own plant alone passes."""
+    from types import SimpleNamespace
+
+    from eha_ros.core.cli import UsageError
+    from eha_ros.tools import run_stack as RS
+    monkeypatch.setattr(RS, 'stopping', lambda: None)     # no signal handling in pytest
+
+    class Stack:
+        stopped = False
+
+        def stop(self):
+            self.stopped = True
+
+    def monitor(n_plants):
+        infos = [SimpleNamespace(node_name='plant_sim', node_namespace='/')] * n_plants
+        return SimpleNamespace(
+            node=SimpleNamespace(get_publishers_info_by_topic=lambda topic: infos),
+            publishers=lambda topic, wait: ['/plant_sim'] if infos else [],
+            close=lambda: None)
+
+    out = tmp_path / 'run'
+    out.mkdir()
+    (out / 'stack.json').write_text('{}')
+    ours = Stack()
+    RS._refuse_late(ours, monitor(1), str(out))
+    assert not ours.stopped and out.exists()
+    with pytest.raises(UsageError) as err:
+        RS._refuse_late(ours, monitor(2), str(out))
+    assert str(err.value).startswith('another EHA stack runs on ROS domain')
+    assert '--domain-id' in str(err.value) and '\n' not in str(err.value)
+    assert ours.stopped and not out.exists()
