@@ -17,8 +17,8 @@ DISCOVERY_WAIT = 2.0            # [s] to see the publishers already on the domai
 
 
 def discovery_wait() -> float:
-    """DISCOVERY_WAIT, or EHA_DISCOVERY_WAIT seconds from the environment (tests set 0 to
-    reach the check made once the loop runs)."""
+    """DISCOVERY_WAIT, or EHA_DISCOVERY_WAIT seconds from the environment (longer on a slow
+    machine; 0 leaves only the check made once the loop runs)."""
     try:
         return max(0.0, float(os.environ.get('EHA_DISCOVERY_WAIT', DISCOVERY_WAIT)))
     except ValueError:
