@@ -320,12 +320,9 @@ def test_second_plant_seen_after_the_start_is_refused(tmp_path, monkeypatch):
         def stop(self):
             self.stopped = True
 
-    def monitor(n_plants):
-        infos = [SimpleNamespace(node_name='plant_sim', node_namespace='/')] * n_plants
-        return SimpleNamespace(
-            node=SimpleNamespace(get_publishers_info_by_topic=lambda topic: infos),
-            publishers=lambda topic, wait: ['/plant_sim'] if infos else [],
-            close=lambda: None)
+    def monitor(n_plants):        # DiagMonitor.publishers: one node name per publisher
+        return SimpleNamespace(publishers=lambda topic, wait: ['/plant_sim'] * n_plants,
+                               close=lambda: None)
 
     out = tmp_path / 'run'
     out.mkdir()

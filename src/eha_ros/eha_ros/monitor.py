@@ -16,15 +16,6 @@ PLANT_TOPIC = '/eha/state'      # published by exactly one plant side per stack
 DISCOVERY_WAIT = 2.0            # [s] to see the publishers already on the domain
 
 
-def discovery_wait() -> float:
-    """DISCOVERY_WAIT, or EHA_DISCOVERY_WAIT seconds from the environment (longer on a slow
-    machine; 0 leaves only the check made once the loop runs)."""
-    try:
-        return max(0.0, float(os.environ.get('EHA_DISCOVERY_WAIT', DISCOVERY_WAIT)))
-    except ValueError:
-        return DISCOVERY_WAIT
-
-
 def parse_value(text: str):
     """Diagnostic values travel as strings: numbers back to int/float, the rest as is."""
     for cast in (int, float):
@@ -115,8 +106,9 @@ class DiagMonitor:
         raise TimeoutError(f'no /diagnostics from {prefix!r} within {timeout:g} s')
 
     def publishers(self, topic: str, wait: float) -> list[str]:
-        """Nodes publishing ``topic`` as soon as discovery shows one (its node's name may
-        come up to 1 s after the endpoint), else [] after ``wait`` seconds."""
+        """The node of each publisher of ``topic`` (one entry per publisher, sorted) as soon
+        as discovery shows one (its node's name may come up to 1 s after the endpoint), else
+        [] after ``wait`` seconds."""
         end, named_by = time.monotonic() + wait, None
         while True:
             infos = self.node.get_publishers_info_by_topic(topic)
@@ -125,8 +117,8 @@ class DiagMonitor:
                 named_by = named_by or now + 1.0
                 if now >= named_by or not any(i.node_name.startswith('_NODE_NAME_UNKNOWN')
                                               for i in infos):
-                    return sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
-                                   for i in infos})
+                    return sorted(f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                                  for i in infos)
             elif now >= end:
                 return []
             time.sleep(0.05)
@@ -148,17 +140,18 @@ class DiagMonitor:
             rclpy.try_shutdown()
 
 
-def refuse_second_stack(monitor: DiagMonitor, hint: str, wait: float | None = None,
+def refuse_second_stack(monitor: DiagMonitor, hint: str, wait: float = DISCOVERY_WAIT,
                         own: int = 0):
     """UsageError (one line, exit 2) when a plant other than our ``own`` (0 or 1) publishes
     PLANT_TOPIC on this ROS domain: two stacks on one domain would drive each other's nodes
     (states, commands, fault injections and lock-step clocks mix). ``hint`` says how to start
     one beside it. Checked before the start (discovery may show a stack later than ``wait``
     on a loaded machine) and again once our own loop runs (own=1, wait=0)."""
-    names = monitor.publishers(PLANT_TOPIC, discovery_wait() if wait is None else wait)
-    if len(monitor.node.get_publishers_info_by_topic(PLANT_TOPIC)) > own and names:
+    names = monitor.publishers(PLANT_TOPIC, wait)
+    if len(names) > own:
         raise UsageError(f'another EHA stack runs on ROS domain '
-                         f'{os.environ.get("ROS_DOMAIN_ID", "0")} ({", ".join(names)} publishes '
+                         f'{os.environ.get("ROS_DOMAIN_ID", "0")} '
+                         f'({", ".join(sorted(set(names)))} publishes '
                          f'{PLANT_TOPIC}): stop it, or run this one on a domain of its own: '
                          f'{hint}')
 
