@@ -163,14 +163,22 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def test_nodes_die_with_run_stack_even_on_sigkill(tmp_path):
+def test_nodes_die_with_run_stack_even_on_sigkill(tmp_path, ros_node):
     """Issue 21 item 2: SIGKILL of run_stack (no handler can run) still ends every node it
     started: the kernel sends them SIGTERM when their parent dies (stack.spawn); the recorder
-    finishes its file, which the standard mcap reader opens."""
+    finishes its file, which the standard mcap reader opens. The kill comes once the plant has
+    published tick 1500 (seen over DDS), not after a wall time: lock-step on a loaded machine
+    can be slow."""
     from mcap.reader import make_reader
+    from rclpy.qos import QoSProfile
+    from eha_msgs.msg import ActuatorState
+    last = [0]
+    ros_node.create_subscription(ActuatorState, '/eha/state',
+                                 lambda m: last.__setitem__(0, m.seq), QoSProfile(depth=10))
     st = Started(tmp_path, 'killed', '--duration', '300', '--record', '--mode', 'lockstep')
     try:
         assert st.running(), st.lines
+        assert wait_for(lambda: last[0] >= 1500, 120), last
         kids = st.children()
         assert len(kids) == 5, kids          # recorder, plant_sim, estimator, controller, manager
         st.proc.kill()
@@ -181,7 +189,7 @@ def test_nodes_die_with_run_stack_even_on_sigkill(tmp_path):
             os.kill(k, signal.SIGKILL)
     with open(st.folder / 'recording.mcap', 'rb') as fh:
         stats = make_reader(fh).get_summary().statistics
-    assert stats.message_count > 1000
+    assert stats.message_count > 1000, stats      # ~4 topics at 1 kHz for >= 1.5 s of sim time
 
 
 def _child(st, name):
