@@ -4,7 +4,7 @@ Every topic under /eha (plus /diagnostics) is found as it appears (nodes.tap: ra
 publishers' QoS) and served as a channel with message encoding ``cdr`` and a ``ros2msg``
 schema holding the full message definition, the bytes exactly as sent: the Foxglove app,
 Lichtblick and PlotJuggler decode them without the packages. Inside eha_loop (run_stack
---live) the loop's topics arrive in-process as message objects, serialized here. A message is
+--live) the loop's topics arrive in-process as message objects, encoded here (core.cdr). A message is
 only taken while a client is subscribed to its channel (``Channel.has_sinks``), queued, and
 handed to the server in one burst every ``live.flush_period``; ``live.decimation`` keeps every
 N-th message of a topic. log time = the message's header stamp (sim time in lock-step, where
@@ -25,6 +25,7 @@ import sys
 import threading
 import time
 
+from ..core import cdr
 from ..core.live_params import SCHEMA
 from ..core.mcap_sink import stamp_ns
 from ..core.params import ParamError
@@ -198,6 +199,7 @@ def make_node(params: dict):
             counts, queue, at_once = self.received, self.queue, not self.flush
             backlog = self.p['live.backlog']
             entry = (topic, ch.log, stamped)
+            encode = self.encoder(type_name)
 
             @unlocked                    # in eha_loop: touches nothing the loop shares
             def on_message(data):
@@ -211,12 +213,21 @@ def make_node(params: dict):
                     self.dropped += 1
                     return
                 if not isinstance(data, bytes):
-                    data = serialize_message(data)
+                    data = encode(data)
                 queue.append((entry, data, now()))
                 if at_once:
                     self.flush_queue()
             on_message.eha_wanted = has_sinks     # eha_loop: nothing built for no viewer
             return on_message
+
+        @staticmethod
+        def encoder(type_name):
+            """msg -> CDR bytes: core.cdr's one struct.pack where the type has a fixed layout
+            (every eha_msgs type), else serialize_message."""
+            try:
+                return cdr.encoder(msgdefs.message_class(type_name))
+            except (cdr.Unsupported, ValueError):
+                return serialize_message
 
         def flush_queue(self):
             """Hand the queued messages to the server. log time = the header stamp, else the
