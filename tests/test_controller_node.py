@@ -97,6 +97,38 @@ def test_watchdog_zero_speed_and_bumpless_recovery(ctl):
     assert np.all(np.abs(after[:3]) < 838.0)
 
 
+def test_inactive_while_the_plant_side_is_and_bumpless_when_it_becomes_active(ctl, ros_node):
+    """Issue 18: the plant side says INACTIVE on eha/plant_state (a disarmed bridge): with a
+    5 mm reference and the piston at 0 the controller answers every estimate with zero and
+    integrates nothing (it used to wind up to the 838 rad/s clamp); ACTIVE again: it starts
+    from the piston position (first answers near zero, then driving towards the reference)."""
+    from lifecycle_msgs.msg import State
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    pub = ros_node.create_publisher(State, '/eha/plant_state', qos)
+    pub.publish(State(id=State.PRIMARY_STATE_INACTIVE, label='inactive'))
+    assert wait_for(lambda: ctl.diags and ctl.diags[-1].get('plant_state') == 'inactive', 20), \
+        ctl.diags[-1:]
+    ctl.position = 0.0
+    ctl.ref_pub.publish(ctl.Ref(position=0.005))
+    first = ctl.seq
+    assert wait_for(lambda: ctl.seq > first + 1500, 10)
+    held = [c.motor_speed_ref for c in ctl.commands if c.seq > first + 5]
+    assert len(held) > 1000 and all(u == 0.0 for u in held), max(map(abs, held))
+    assert ctl.diags[-1]['active'] == 'False'
+    n = len(ctl.commands)
+    pub.publish(State(id=State.PRIMARY_STATE_ACTIVE, label='active'))
+    assert wait_for(lambda: any(c.motor_speed_ref != 0.0 for c in ctl.commands[n:]), 10)
+    k = next(i for i in range(n, len(ctl.commands)) if ctl.commands[i].motor_speed_ref != 0.0)
+    assert wait_for(lambda: len(ctl.commands) > k + 300, 10)
+    after = np.array([c.motor_speed_ref for c in ctl.commands[k:k + 300]])
+    # bumpless: the reference ramps from the piston at 190 mm/s, the output builds up from
+    # near zero (a 5 mm error at once would be the clamp) and drives towards +5 mm
+    assert abs(after[0]) < 50.0 and after[-1] > 0.0, after[:10]
+    ctl.ref_pub.publish(ctl.Ref(position=0.0))
+
+
 def test_stale_estimates_trip_watchdog(ctl):
     time.sleep(0.3)
     ctl.stale = True

@@ -130,6 +130,17 @@ def test_state_stream_at_1khz(probe):
     assert len(probe.truths) > 0 and all(t.seq > 0 for t in probe.truths[-10:])
 
 
+def test_plant_state_is_active_for_a_late_subscriber(probe, ros_node):
+    """/eha/plant_state (latched): a subscriber that joins while the plant runs gets ACTIVE
+    (the simulation applies every command; the controller rests only on INACTIVE)."""
+    from eha_ros.nodes.common import latched_qos
+    from lifecycle_msgs.msg import State
+    got = []
+    ros_node.create_subscription(State, '/eha/plant_state', got.append, latched_qos())
+    assert wait_for(lambda: got, 20), 'no /eha/plant_state'
+    assert [(m.id, m.label) for m in got] == [(State.PRIMARY_STATE_ACTIVE, 'active')]
+
+
 def test_command_applied_gives_piston_speed_d_over_a(probe):
     probe.hold(100.0, 0.6)        # 100 rad/s -> 100 * D_p/A_p = 26 mm/s
     probe.truths.clear()
@@ -257,6 +268,8 @@ def test_lockstep_start_waits_for_named_subscribers(ros_node):
     """sim_node.start_after (what run_stack --record sets for the recorder): tick 0
     is held until the named node subscribes to every /eha topic with a publisher."""
     from eha_msgs.msg import ActuatorCommand, PlantTruth
+    from eha_ros.nodes.common import latched_qos
+    from lifecycle_msgs.msg import State
     me = ros_node.get_name()
     proc, states = held_plant(ros_node, '/lg', '-p', f'sim_node.start_after:=[{me}]')
     try:
@@ -264,6 +277,9 @@ def test_lockstep_start_waits_for_named_subscribers(ros_node):
         assert max(s.seq for s in states) == 0
         ros_node.create_subscription(PlantTruth, '/lg/eha/sim/truth', lambda m: None, 10)
         ros_node.create_subscription(ActuatorCommand, '/lg/eha/command', lambda m: None, 10)
+        time.sleep(1.0)          # nor to eha/plant_state: still held
+        assert max(s.seq for s in states) == 0
+        ros_node.create_subscription(State, '/lg/eha/plant_state', lambda m: None, latched_qos())
         assert wait_for(lambda: states[-1].seq == 1, 20), 'tick 0 still held'
     finally:
         _, _, err = stop_process(proc)

@@ -40,6 +40,8 @@ def test_runs_for_duration_and_stops_cleanly(tmp_path, mode, procs):
     assert set(summary['cpu_share']) == procs
     for node in ('estimator', 'controller', 'switch_manager'):
         assert any(k.startswith(node) for k in summary['diagnostics']), node
+    # the plant's latched ACTIVE reached the controller (composed: replayed in-process)
+    assert summary['diagnostics']['controller: loop']['plant_state'] == 'active'
 
 
 def test_a_node_that_dies_is_reported(tmp_path):

@@ -12,6 +12,7 @@ import gc
 import re
 import signal
 import sys
+import threading
 import time
 from typing import Callable
 
@@ -162,6 +163,35 @@ def node_kwargs() -> dict:
     """Keyword arguments for rclpy Node so params-file keys show up as overrides."""
     return dict(automatically_declare_parameters_from_overrides=False,
                 allow_undeclared_parameters=False)
+
+
+PLANT_STATE_TOPIC = 'eha/plant_state'
+
+
+class PlantState:
+    """The plant side's state on ``eha/plant_state`` (lifecycle_msgs/State, latched): ACTIVE
+    while it applies eha/command (plant_sim: always; hardware_bridge: while armed), INACTIVE
+    otherwise. The controller is inactive (zero output, no integration) while it is not
+    ACTIVE and starts from the piston position when it becomes ACTIVE. Published on every
+    change, from whichever thread saw it."""
+
+    def __init__(self, node):
+        from lifecycle_msgs.msg import State
+        self.State = State
+        self.pub = node.create_publisher(State, PLANT_STATE_TOPIC, latched_qos())
+        self.active = None
+        self.lock = threading.Lock()
+
+    def set(self, active: bool) -> bool:
+        """Publish when it changed; True when it did."""
+        S, active = self.State, bool(active)
+        with self.lock:
+            if active == self.active:
+                return False
+            self.active = active
+            self.pub.publish(S(id=S.PRIMARY_STATE_ACTIVE, label='active') if active else
+                             S(id=S.PRIMARY_STATE_INACTIVE, label='inactive'))
+        return True
 
 
 def channel_ok(node, msg, counters) -> bool:

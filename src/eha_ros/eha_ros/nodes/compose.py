@@ -43,6 +43,7 @@ class Bus:
         self.published: set[str] = set()
         self.deferred: list = []             # DDS subscriptions decided at finalize()
         self.guests: set[str] = set()        # nodes without the process's global ROS args
+        self.latched: dict[str, object] = {}  # topic -> last message of a latched publisher
         self.final = False
 
     def guard(self, callback):
@@ -86,6 +87,8 @@ class LocalPublisher:
 
     def publish(self, msg):
         with self.bus.lock:
+            if self.latched:          # transient local: a later local subscriber gets it too
+                self.bus.latched[self.topic] = msg
             for callback in self.bus.subscribers.get(self.topic, ()):
                 callback(msg)
         if self.latched or self.remote_subscribers():
@@ -132,6 +135,9 @@ def composed_base(bus: Bus):
             guarded = bus.guard(callback)
             with bus.lock:          # a callback may subscribe from outside the lock (live)
                 bus.subscribers[name].append(guarded)
+                if name in bus.latched and isinstance(qos_profile, QoSProfile) and \
+                        qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
+                    guarded(bus.latched[name])       # as DDS does for a late joiner
             if bus.final:
                 if name not in bus.published:
                     return self.dds_subscription(name, msg_type, guarded, qos_profile, **kwargs)

@@ -3,7 +3,9 @@ position controller (core.controller.PositionController), follows eha/reference,
 integrator through channel switches (eha/redundancy), and goes to zero speed when estimates
 stop or go stale for more than watchdog_ticks, or in the safe state (core.safe_state: the
 estimate reports a position fault or the switch manager is FAILED_SAFE); it recovers from
-both without a jump."""
+both without a jump. While the plant side says on eha/plant_state that it does not apply
+commands (a disarmed bridge) the controller is inactive: zero output, no integration; it
+starts from the piston position when the plant side becomes active."""
 from __future__ import annotations
 
 import sys
@@ -16,7 +18,8 @@ from ..core.controller.params import SCHEMA
 from ..core.controller.position import PositionController
 from ..core.stats import Counters, LoopStats
 from . import diag
-from .common import clock_s, declare_and_validate, latched_qos, node_base, run, stream_qos
+from .common import (PLANT_STATE_TOPIC, clock_s, declare_and_validate, latched_qos, node_base,
+                     run, stream_qos)
 
 
 def drive_mismatch(p: dict) -> float:
@@ -40,6 +43,7 @@ def make_node(params: dict):
     Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, PositionEstimate, PositionReference,
                               RedundancyStatus)
+    from lifecycle_msgs.msg import State
 
     class Controller(Node):
         def __init__(self):
@@ -63,6 +67,8 @@ def make_node(params: dict):
             self.last_speed = 0.0
             self.answer = None                  # (seq, speed, saturated, stamp) of the last command
             self.active_channel = None
+            self.plant_state = None             # eha/plant_state label; None: not heard (active)
+            self.idle = False                   # inactive: the next fresh estimate restarts
             self.pending = deque(maxlen=2000)   # tick-locked references waiting for their tick
             self.ref_seq = 0                    # newest tick-locked reference seen
             self.held = deque()                 # lock-step: estimates waiting for their reference
@@ -75,6 +81,8 @@ def make_node(params: dict):
             self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
             self.create_subscription(PositionReference, 'eha/reference', self.on_reference, qos)
             self.create_subscription(RedundancyStatus, 'eha/redundancy', self.on_redundancy,
+                                     latched_qos())
+            self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
                                      latched_qos())
             # checking at half the watchdog time keeps the reaction within watchdog_ticks
             # without a second 1 kHz callback in the executor
@@ -119,6 +127,26 @@ def make_node(params: dict):
             self.active_channel = msg.active_channel
             self.manager_state = msg.state
 
+        def on_plant_state(self, msg):
+            """The plant side applies commands only while ACTIVE."""
+            label = 'active' if msg.id == State.PRIMARY_STATE_ACTIVE else \
+                (msg.label or f'state {msg.id}')
+            if label == self.plant_state:
+                return
+            self.plant_state = label
+            if label == 'active':
+                self.get_logger().info('plant side active: control starts from the piston '
+                                       'position')
+            else:
+                self.idle = True
+                self.c.bump('inactive_periods')
+                self.get_logger().info(f'plant side {label}: controller inactive (zero output, '
+                                       f'no integration) until it is active')
+
+        @property
+        def inactive(self) -> bool:
+            return self.plant_state not in (None, 'active')
+
         def on_estimate(self, msg):
             """Lock-step with a tick-locked reference source (the sweep): estimate(k) waits for
             reference(k), so the loop (and its results) do not depend on who runs faster."""
@@ -153,7 +181,9 @@ def make_node(params: dict):
                 self.c.bump('stale_estimates')
             if fresh:
                 self.last_good = now
-            if SAFE.controller_holds(msg.consistency, self.manager_state):
+            if self.inactive:
+                speed, saturated = 0.0, False
+            elif SAFE.controller_holds(msg.consistency, self.manager_state):
                 if self.safe is None:
                     self.safe = (f'switch manager {self.manager_state}'
                                  if self.manager_state == FAILED_SAFE else
@@ -163,6 +193,9 @@ def make_node(params: dict):
                                             f'commanding zero motor speed')
                 speed, saturated = 0.0, False
             elif fresh:
+                if self.idle:
+                    self.idle = False
+                    self.ctl.start(msg.position)       # bumpless: zero output, reference ramps
                 if self.tripped or self.safe is not None:
                     self.get_logger().info(
                         'estimates back: control resumed from the piston position'
@@ -207,7 +240,9 @@ def make_node(params: dict):
         def publish_diagnostics(self):
             values = self.loop.values()
             values.update(watchdog_tripped=self.tripped, drive_gain_mismatch=self.mismatch,
-                          safe_state=self.safe or '')
+                          safe_state=self.safe or '',
+                          plant_state=self.plant_state or 'not heard (taken as active)',
+                          active=not self.inactive)
             values.update(self.c)
             if self.safe is not None:
                 diag.publish(self, self.pub_diag, 'loop', values, diag.ERROR,
@@ -217,7 +252,8 @@ def make_node(params: dict):
                 self.mismatch > self.p['control.drive_check_tolerance']
             diag.publish(self, self.pub_diag, 'loop', values, diag.WARN if warn else diag.OK,
                          'watchdog tripped' if self.tripped else
-                         ('inputs rejected or drive mismatch' if warn else 'ok'))
+                         ('inputs rejected or drive mismatch' if warn else
+                          f'inactive: plant side {self.plant_state}' if self.inactive else 'ok'))
 
     return Controller()
 

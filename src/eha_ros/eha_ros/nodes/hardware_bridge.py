@@ -3,7 +3,8 @@ of plant_sim, with plant_sim's topics (minus truth and sim-only inputs).
 
 Publishes eha/state each cycle, applies eha/command (through core.bridge.Safety: armed only,
 saturated, rate limited, watchdog) and eha/channel_select, serves eha/bridge/arm (SetBool)
-and eha/bridge/reset (Trigger, clears a latched link fault), reports on /diagnostics. All
+and eha/bridge/reset (Trigger, clears a latched link fault), reports on /diagnostics;
+eha/plant_state (latched) is ACTIVE while armed, so the controller rests while disarmed. All
 ADS traffic runs on one I/O thread (one sum read/write request per cycle, core.bridge.link);
 ROS callbacks only take a short lock and never publish while holding it. Real time: the
 I/O thread cycles at Ts with absolute deadlines. Lock-step (bridge.lockstep): it cycles when
@@ -24,8 +25,8 @@ from ..core.cli import UsageError
 from ..core.params import default_config_dir
 from ..core.stats import Counters, RingStats
 from . import diag
-from .common import (StartGate, channel_ok, declare_and_validate, latched_qos, node_base,
-                     publish_counted, run, stream_qos)
+from .common import (PlantState, StartGate, channel_ok, declare_and_validate, latched_qos,
+                     node_base, publish_counted, run, stream_qos)
 
 
 def state_publishers(node, topic: str) -> list[str]:
@@ -85,6 +86,8 @@ def make_node(params: dict):
             qos = stream_qos()
             self.pub_state = self.create_publisher(ActuatorState, 'eha/state', qos)
             self.pub_diag = diag.publisher(self)
+            self.plant_state = PlantState(self)
+            self.plant_state.set(False)           # disarmed: commands are not applied
             self.pub_clock = self.create_publisher(Clock, '/clock', 10) if self.lockstep else None
             self.start_gate = StartGate(self, p['bridge.start_after'],
                                         self.state_topic.rsplit('/', 1)[0] + '/',
@@ -155,7 +158,14 @@ def make_node(params: dict):
                     ok, text = self.safety.arm() if req.data else self.safety.disarm('requested')
             resp.success, resp.message = bool(ok), text
             self.log(ok, f'arm={req.data}: {text}')
+            self.sync_plant_state()
             return resp
+
+        def sync_plant_state(self):
+            """eha/plant_state follows the arming (published outside the lock)."""
+            with self.lock:
+                armed = self.safety.armed
+            self.plant_state.set(armed)
 
         def on_reset(self, req, resp):
             with self.lock:
@@ -325,6 +335,7 @@ def make_node(params: dict):
                 # lock-step: a cycle without a read repeats old data, invalid at once
                 valid = self.safety.fresh and self.connected and (read_ok or not self.lockstep)
             self.publish_state(valid)
+            self.sync_plant_state()
             self.exec_time.add(time.perf_counter() - t0)
 
         def link_failed(self, err: LinkError):
@@ -411,6 +422,7 @@ def make_node(params: dict):
             else:
                 level, msg = diag.OK, 'armed' if sf.armed else 'disarmed'
             diag.publish(self, self.pub_diag, 'link', values, level, msg)
+            self.sync_plant_state()
 
         def close(self):
             self.running = False

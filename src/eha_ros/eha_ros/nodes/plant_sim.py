@@ -2,7 +2,7 @@
 
 Publishes eha/state and eha/sim/truth each tick, applies the latest eha/command at the next
 tick, takes eha/sim/load_force and eha/channel_select, serves eha/inject_fault and reports
-on /diagnostics. Real time: a loop thread with absolute deadlines (overruns counted).
+on /diagnostics; eha/plant_state (latched) says ACTIVE: commands are applied. Real time: a loop thread with absolute deadlines (overruns counted).
 Lock-step (sim_node.lockstep): publishes /clock and steps only when command(k) arrived.
 """
 from __future__ import annotations
@@ -16,8 +16,8 @@ from ..core.plant import EhaPlant
 from ..core.plant_sim_params import SCHEMA
 from ..core.stats import Counters, Histogram, RingStats
 from . import diag
-from .common import (StartGate, channel_ok, declare_and_validate, latched_qos, node_base,
-                     publish_counted, run, stream_qos)
+from .common import (PlantState, StartGate, channel_ok, declare_and_validate, latched_qos,
+                     node_base, publish_counted, run, stream_qos)
 
 
 class CommandGate:
@@ -90,6 +90,7 @@ def make_node(params: dict):
                                      latched_qos())
             self.create_service(InjectFault, 'eha/inject_fault', self.on_fault)
             self.create_timer(self.p['sim_node.diagnostics_period'], self.publish_diagnostics)
+            PlantState(self).set(True)            # the simulation applies every command
 
             self.running = True
             self.publish(self.now_stamp())
