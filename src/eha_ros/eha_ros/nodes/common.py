@@ -183,8 +183,11 @@ class PlantState:
         self.lock = threading.Lock()
 
     def set(self, active: bool) -> bool:
-        """Publish when it changed; True when it did."""
+        """Publish when it changed; True when it did (called every bridge cycle: the common
+        case, no change, does not take the lock)."""
         S, active = self.State, bool(active)
+        if active == self.active:
+            return False
         with self.lock:
             if active == self.active:
                 return False

@@ -107,10 +107,16 @@ class LocalPublisher:
         return getattr(self.dds, name)
 
 
+def is_latched(qos_profile) -> bool:
+    """A transient-local QoS profile (a depth alone is volatile)."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    return isinstance(qos_profile, QoSProfile) and \
+        qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+
+
 def composed_base(bus: Bus):
     """rclpy Node subclass whose topics, timers and services go through ``bus``."""
     from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile
 
     class ComposedNode(Node):
         callback_lock = bus.lock
@@ -126,17 +132,14 @@ def composed_base(bus: Bus):
             if name == '/clock' or name == '/diagnostics' or name.startswith('/rosout'):
                 return dds
             bus.published.add(name)
-            latched = isinstance(qos_profile, QoSProfile) and \
-                qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-            return LocalPublisher(bus, name, dds, latched)
+            return LocalPublisher(bus, name, dds, is_latched(qos_profile))
 
         def create_subscription(self, msg_type, topic, callback, qos_profile, **kwargs):
             name = self.resolve_topic_name(topic)
             guarded = bus.guard(callback)
             with bus.lock:          # a callback may subscribe from outside the lock (live)
                 bus.subscribers[name].append(guarded)
-                if name in bus.latched and isinstance(qos_profile, QoSProfile) and \
-                        qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
+                if name in bus.latched and is_latched(qos_profile):
                     guarded(bus.latched[name])       # as DDS does for a late joiner
             if bus.final:
                 if name not in bus.published:

@@ -334,8 +334,9 @@ def make_node(params: dict):
                 self.safety.set_data(self.staleness.fresh(self.now()), self.safety.drive_fault)
                 # lock-step: a cycle without a read repeats old data, invalid at once
                 valid = self.safety.fresh and self.connected and (read_ok or not self.lockstep)
+                armed = self.safety.armed
             self.publish_state(valid)
-            self.sync_plant_state()
+            self.plant_state.set(armed)           # arm_at_start arms in take_values
             self.exec_time.add(time.perf_counter() - t0)
 
         def link_failed(self, err: LinkError):
@@ -354,6 +355,7 @@ def make_node(params: dict):
                 f'ADS link to the PLC lost after {self.fails} failed cycles ({err})'
                 f'{"; disarmed" if was_armed else ""}; fault latched: reset with '
                 f'eha/bridge/reset once the link is back')
+            self.plant_state.set(False)           # no cycles run until it reconnects
 
         def stamp(self):
             if self.lockstep:

@@ -4,10 +4,10 @@ Every topic under /eha (plus /diagnostics) is found as it appears (nodes.tap: ra
 publishers' QoS) and served as a channel with message encoding ``cdr`` and a ``ros2msg``
 schema holding the full message definition, the bytes exactly as sent: the Foxglove app,
 Lichtblick and PlotJuggler decode them without the packages. Inside eha_loop (run_stack
---live) the loop's topics arrive in-process as message objects, encoded here (core.cdr). A message is
-only taken while a client is subscribed to its channel (``Channel.has_sinks``), queued, and
-handed to the server in one burst every ``live.flush_period``; ``live.decimation`` keeps every
-N-th message of a topic. log time = the message's header stamp (sim time in lock-step, where
+--live) the loop's topics arrive in-process as message objects, encoded here (core.cdr). A
+message is only taken while a client is subscribed to its channel (``Channel.has_sinks``),
+queued, and handed to the server in one burst every ``live.flush_period``;
+``live.decimation`` keeps every N-th message of a topic. log time = the message's header stamp (sim time in lock-step, where
 the newest stamp is also broadcast as the server time), else receive time.
 
 The services under the namespace (/eha/inject_fault, /eha/switch_channel, /eha/bridge/arm, ...)

@@ -2,7 +2,8 @@
 
 Publishes eha/state and eha/sim/truth each tick, applies the latest eha/command at the next
 tick, takes eha/sim/load_force and eha/channel_select, serves eha/inject_fault and reports
-on /diagnostics; eha/plant_state (latched) says ACTIVE: commands are applied. Real time: a loop thread with absolute deadlines (overruns counted).
+on /diagnostics; eha/plant_state (latched) says ACTIVE: commands are applied. Real time: a
+loop thread with absolute deadlines (overruns counted).
 Lock-step (sim_node.lockstep): publishes /clock and steps only when command(k) arrived.
 """
 from __future__ import annotations
