@@ -9,7 +9,8 @@ import yaml
 from eha_ros.core.batch import node_params
 from eha_ros.core.bridge.link import AdsLink, LinkError, SymbolError
 from eha_ros.core.bridge.peer import AdsPeer
-from eha_ros.core.bridge.safety import Safety, Staleness
+from eha_ros.core.hardware.gate import CommandGate
+from eha_ros.core.hardware.staleness import Staleness
 from eha_ros.core.bridge.symbols import ROLES, load_symbol_map
 from eha_ros.core.params import ParamError, default_config_dir
 from eha_ros.core.plant_sim_params import SCHEMA as SIM
@@ -62,8 +63,8 @@ def test_malformed_or_missing_map_file(tmp_path):
 
 # ---------------------------------------------------------------- safety
 def make_safety(**kw):
-    s = Safety(max_speed=kw.get('max_speed', 800.0), max_rate=kw.get('max_rate', 1e5),
-               watchdog_time=kw.get('watchdog', 0.02), arm_max_command=10.0)
+    s = CommandGate(max_speed=kw.get('max_speed', 800.0), max_rate=kw.get('max_rate', 1e5),
+                    timeout=kw.get('watchdog', 0.02), arm_max_command=10.0)
     s.set_link(True)
     s.set_data(fresh=True)
     return s
@@ -124,9 +125,9 @@ def test_watchdog_zeroes_at_once_and_recovers_ramping():
     first_zero = min(tt for tt, v in outs if v == 0.0)
     assert first_zero - last_cmd <= 0.02 + 1e-3 + 1e-9
     assert all(v == 200.0 for tt, v in outs if tt - last_cmd <= 0.02)
-    assert s.c['watchdog_trips'] == 1
+    assert s.c['command_timeouts'] == 1
     s.set_command(200.0, t)
-    assert s.speed_output(t, 1e-3) == 200.0 and not s.watchdog_tripped
+    assert s.speed_output(t, 1e-3) == 200.0 and not s.stale
 
 
 def test_link_loss_latches_disarms_and_needs_reset():
@@ -134,7 +135,7 @@ def test_link_loss_latches_disarms_and_needs_reset():
     s.arm()
     s.set_link(False, 'timeout')
     assert not s.armed and s.link_fault and s.speed_output(0.0, 1e-3) == 0.0
-    assert s.reset() == (False, 'reset refused: the ADS link is still down')
+    assert s.reset() == (False, 'reset refused: the link is still down')
     s.set_link(True)
     s.set_data(fresh=True)
     assert s.link_fault and not s.arm()[0]                # still latched after reconnect
@@ -144,10 +145,10 @@ def test_link_loss_latches_disarms_and_needs_reset():
 def test_staleness_from_plc_cycle_counter():
     st = Staleness(0.01)
     assert not st.fresh(0.0)
-    assert st.update(5, 0.0)
-    assert st.update(5, 0.009)          # counter still, within the limit
-    assert not st.update(5, 0.011)      # standing still too long
-    assert st.update(6, 0.012)
+    assert st.update(5, 0.0)                            # a new sample
+    assert not st.update(5, 0.009) and st.fresh(0.009)  # a repeat, within the limit
+    assert not st.update(5, 0.011) and not st.fresh(0.011)    # standing still too long
+    assert st.update(6, 0.012) and st.fresh(0.012)
 
 
 # ---------------------------------------------------------------- ADS link + peer

@@ -2,9 +2,10 @@
 `run_stack --plant bridge --no-peer`. A 5 mm reference sent before arming moves nothing and
 no longer winds the controller up (the bridge says INACTIVE on /eha/plant_state); arming
 succeeds at once; then a 5 mm step within 5 % overshoot and 0.4 s of 2 % settling. In
-lock-step (peer --lockstep, run_stack --mode lockstep): in real time on a loaded machine the
-bridge's catch-up cycles can read the same PLC sample ten times, which the estimator takes for
-a stuck sensor (a false alarm found with this test, 1 run in 7; see docs/nodes/hardware_bridge.md).
+lock-step (peer --lockstep, run_stack --mode lockstep). (In real time on a loaded machine the
+bridge's catch-up cycles could read the same PLC sample ten times, which the estimator took
+for a stuck sensor; a repeated sample is now published not valid and predicted over:
+docs/nodes/plant_side.md.)
 In a module of its own: it owns the /eha topics."""
 import os
 import subprocess

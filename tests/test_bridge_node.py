@@ -32,7 +32,7 @@ def peer():
 def bridge_cmd(port, *extra):
     return node_command('hardware_bridge', extra=[
         '-p', f'hardware_bridge:ads.tcp_port:={port}',
-        '-p', f'hardware_bridge:bridge.watchdog_time:={WATCHDOG}',
+        '-p', f'hardware_bridge:bridge.command_timeout:={WATCHDOG}',
         '-p', 'hardware_bridge:bridge.diagnostics_period:=0.2',
         '-p', 'hardware_bridge:bridge.stale_limit:=0.05',     # the PLC task shares this process
         # and a busy test process can miss 3 x 100 ms (seen once in CI after the reset)
@@ -108,7 +108,7 @@ class Probe:
 
     def _diag(self, msg):
         for st in msg.status:
-            if st.name == 'hardware_bridge: link':
+            if st.name == 'hardware_bridge: loop':
                 d = {kv.key: kv.value for kv in st.values}
                 d['_level'], d['_message'] = st.level[0], st.message
                 self.diags.append(d)
@@ -175,8 +175,12 @@ def test_state_stream_through_ads(probe, peer):
     s = probe.states[-1]
     with peer.lock:
         x = peer.plc.plant.measure().position
-    print(f'state rate {rate:.0f} Hz (real time, loaded machine), seq gaps {np.sum(np.diff(seqs) != 1)}')
-    assert np.all(np.diff(seqs) > 0) and all(m.valid for m in probe.states[-100:])
+    repeats = 1.0 - np.mean([m.valid for m in probe.states])
+    print(f'state rate {rate:.0f} Hz (real time, loaded machine), seq gaps '
+          f'{np.sum(np.diff(seqs) != 1)}, not valid (a repeated PLC sample) {100 * repeats:.1f} %')
+    # the PLC's and the bridge's 1 kHz clocks are not synchronised: now and then a cycle reads
+    # the sample the previous one read, published not valid (the estimator predicts over it)
+    assert np.all(np.diff(seqs) > 0) and repeats < 0.05
     assert abs(s.position - x) < 2e-4 and s.drive_enabled[0] and not s.drive_enabled[1]
     assert s.valve_open[0] and 0.5e6 < s.pressure_a < 3e6 and s.active_channel == 0
 
@@ -206,13 +210,13 @@ def test_armed_speed_reaches_plc_then_watchdog_zeroes_it(probe, peer):
     delay = final[0, 0] - t_last                 # the PLC's first cycle of the final stop
     gap = np.max(np.diff(probe.cmd_times)) if len(probe.cmd_times) > 1 else 0.0
     print(f'watchdog: zero speed at the PLC {1e3 * delay:.1f} ms after the last command '
-          f'(watchdog_time {1e3 * WATCHDOG:.0f} ms); last non-zero {1e3 * (last_moving - t_last):.1f}'
+          f'(command_timeout {1e3 * WATCHDOG:.0f} ms); last non-zero {1e3 * (last_moving - t_last):.1f}'
           f' ms; largest gap between test commands {1e3 * gap:.1f} ms')
     assert final[-1, 0] - final[0, 0] > 0.2 and np.all(final[:, 1] == 0.0)
     assert delay <= WATCHDOG + 0.03                   # 30 ms slack for DDS + load
     assert last_moving - t_last >= WATCHDOG - 0.01    # held until the watchdog time, not earlier
-    assert probe.wait_diag(lambda d: int(d.get('watchdog_trips', 0)) >= 1 and
-                           d['_message'] == 'commands stopped')
+    assert probe.wait_diag(lambda d: int(d.get('command_timeouts', 0)) >= 1 and
+                           d['_message'] == 'commands stale')
     time.sleep(0.2)
     assert abs(probe.states[-1].motor_speed[0]) < 5.0
     probe.arm(False)
@@ -244,7 +248,7 @@ def test_link_dropped_and_restored(probe, peer):
     peer.set_online(False)                       # the PLC stops answering (cable pulled)
     t0 = time.monotonic()
     assert probe.wait_diag(lambda d: d['link_fault_latched'] == 'True' and
-                           d['link_up'] == 'False' and d['armed'] == 'False'), probe.diag()
+                           d['link_up'] == 'False' and d['active'] == 'False'), probe.diag()
     d = probe.diag()
     print(f'link loss reported after {time.monotonic() - t0:.2f} s: {d["_message"]}')
     assert d['_level'] == 2 and 'link fault latched' in d['_message'] and '1861' in d['_message']

@@ -248,6 +248,32 @@ def test_nan_and_out_of_range_position_predict_only_and_counted(params):
     assert not r.update_skipped
 
 
+def test_invalid_repeated_samples_are_predicted_over_not_a_stuck_sensor(params):
+    """A plant side that reads the same device sample twice (the bridge catching up after an
+    overrun) publishes it not valid: the estimator predicts over it with the held speed and the
+    fault detector does not count it; the same readings marked valid are a stuck sensor."""
+    from eha_ros.core.estimator import fault_detector as fd
+    n_stuck = params['estimator.fault.stuck_samples']
+    rng = np.random.default_rng(3)
+    w = np.array([0.0, 0.0])
+    results = {}
+    for valid in (False, True):
+        est = Estimator(params)
+        for _ in range(300):                               # noisy sensor at rest
+            r = est.update(10e-6 * rng.standard_normal(), w, 1e6, 1e6, 0)
+        assert r.sensor_fault == fd.NONE
+        z = 10e-6 * rng.standard_normal()
+        r = est.update(z, w, 1e6, 1e6, 0)
+        codes = [est.update(z, w, 1e6, 1e6, 0, valid=valid).sensor_fault
+                 for _ in range(2 * n_stuck)]
+        results[valid] = codes
+        if not valid:
+            assert est.counters['invalid_states'] == 2 * n_stuck
+            assert est.counters.get('rejected_position', 0) == 0
+    assert all(c == fd.NONE for c in results[False]), results[False]
+    assert fd.STUCK in results[True]
+
+
 def test_bad_pressure_falls_back_to_position_update(params):
     est = Estimator(params)
     w = np.array([0.0, 0.0])

@@ -80,8 +80,8 @@ def test_plant_swapped_for_the_bridge_and_the_ads_test_peer(tmp_path):
     assert r.returncode == 0, r.stdout[-1500:] + r.stderr[-1500:]
     assert set(summary['exit_codes']) == {'ads_peer', 'eha_loop'}
     assert '--plant bridge' in summary['processes']['eha_loop']
-    link = summary['diagnostics']['hardware_bridge: link']
-    assert link['armed'] is True and link['link_up'] is True and link['ticks'] > 100, link
+    link = summary['diagnostics']['hardware_bridge: loop']
+    assert link['active'] is True and link['state'] == 'active' and link['link_up'] is True and link['ticks'] > 100, link
     assert 'plant_sim: loop' not in summary['diagnostics']
     for node in ('estimator', 'controller', 'switch_manager'):
         assert any(k.startswith(node) for k in summary['diagnostics']), node

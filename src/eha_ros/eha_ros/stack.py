@@ -16,7 +16,7 @@ import time
 from .core.batch import NODE_FILES
 from .core.params import default_config_dir
 
-# plant-side nodes and the prefix of their loop parameters (plant_sim_params.lockstep_params):
+# plant-side nodes and the prefix of their loop parameters (core.hardware.params.loop_params):
 # their own lock-step switch (they publish /clock; the others use sim time) and start gate
 LOCKSTEP_PREFIX = {'plant_sim': 'sim_node', 'hardware_bridge': 'bridge'}
 

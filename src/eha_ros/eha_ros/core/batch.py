@@ -147,7 +147,7 @@ class BatchLoop:
         x0 = plant.position
         if est is not None:
             r = est.update(m.position, m.motor_speed, m.pressure_a, m.pressure_b,
-                           m.active_channel)
+                           m.active_channel, valid=m.valid)
             x_hat, nis, innov = r.position, r.nis, r.innovation
             code, nd = r.sensor_fault, r.nis_dim
             est_ok = r.nis_dim > 0 and not r.sensor_fault

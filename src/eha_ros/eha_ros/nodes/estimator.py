@@ -81,11 +81,11 @@ def make_node(params: dict):
                                        throttle_duration_sec=1.0)
             self.last_seq = msg.seq
             r = self.est.update(msg.position, msg.motor_speed, msg.pressure_a, msg.pressure_b,
-                                msg.active_channel, ticks)
+                                msg.active_channel, ticks, msg.valid)
             self.c.bump('estimates')
             if r.consistency != self.verdict:      # one log line per verdict change (issue 15)
                 self.on_verdict(r.consistency, msg.seq)
-            if r.rejected:
+            if r.rejected and msg.valid:     # invalid states: counted, not warned (repeats)
                 self.c.bump('rejected_states')
                 self.get_logger().warning(
                     f'state seq {msg.seq}: rejected {r.rejected} '

@@ -126,15 +126,16 @@ def make_node(params: dict):
         def handle_state(self, msg):
             values = (msg.position, msg.pressure_a, msg.pressure_b, *msg.motor_speed,
                       *msg.motor_current)
-            if not _finite(*values[3:]) or not msg.valid:
-                # speeds/currents are what the monitors judge: a bad sample is not evidence
-                self.c.bump('rejected_states')
-                return
             if self.last_seq is not None and msg.seq > self.last_seq + 1:
                 self.c.bump('lost_states', int(msg.seq - self.last_seq - 1))
             self.last_seq = msg.seq
             self.last_state_time = now = time.monotonic()
-            self.sup.state(int(msg.seq), now)
+            self.sup.state(int(msg.seq), now)      # arrived: the loop's timing counts it
+            if not _finite(*values[3:]) or not msg.valid:
+                # speeds/currents are what the monitors judge: a bad sample is not evidence
+                # (a repeated device sample is published not valid: the bridge's catch-up)
+                self.c.bump('rejected_states')
+                return
             # the loop is closed (and the speed reference known) only while commands answer
             # recent states (a stale command is zeroed in the plant/bridge, unseen from here)
             fresh = self.cmd_seq is not None and \

@@ -32,7 +32,7 @@ STOP_ON_ERROR = {'switch_manager: supervisor': 'loop supervisor', 'recorder: mca
 # (SIGSTOP) or hung. Every node publishes at least once a second (of sim time in lock-step,
 # which may run slower than the wall clock on a loaded machine)
 SILENT_AFTER = {'realtime': 5.0, 'lockstep': 20.0}
-PLANT_NODE = {'sim': 'plant_sim', 'bridge': 'hardware_bridge'}
+PLANT_NODE = {'sim': 'plant_sim', 'bridge': 'hardware_bridge', 'mock': 'hardware_bridge'}
 
 
 def parse(argv):
@@ -44,7 +44,9 @@ def parse(argv):
                     help='realtime (default): wall clock at 1 kHz; lockstep: the plant waits for '
                          'each command, nodes follow /clock (deterministic)')
     ap.add_argument('--plant', choices=sorted(PLANT_NODE), default='sim',
-                    help='sim (default): plant_sim; bridge: hardware_bridge to the drive')
+                    help='sim (default): plant_sim; bridge: hardware_bridge to the drive; mock: '
+                         'hardware_bridge on its mock backend (commands echoed into states, no '
+                         'physics, no PLC; activated at start)')
     ap.add_argument('--structure', choices=('auto', 'composed', 'processes'), default='auto',
                     help='auto (default): composed in real time, processes in lock-step')
     ap.add_argument('--duration', type=float, default=None,
@@ -116,8 +118,10 @@ def plan(args) -> dict:
     if args.no_peer and args.plant != 'bridge':
         raise UsageError('--no-peer only applies to --plant bridge')
     peer = args.plant == 'bridge' and not args.no_peer
-    if peer:                      # the simulated PLC: arm as soon as the preconditions hold
-        extra.setdefault(plant, []).extend(['-p', 'hardware_bridge:bridge.arm_at_start:=true'])
+    if args.plant == 'mock':
+        extra.setdefault(plant, [])[:0] = ['-p', 'hardware_bridge:bridge.backend:=mock']
+    if peer or args.plant == 'mock':      # simulated: activate once the preconditions hold
+        extra.setdefault(plant, [])[:0] = ['-p', 'hardware_bridge:bridge.autostart:=active']
     return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant}
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..params import Param, Schema
 from ..plant.parameters import PLANT_SCHEMA
-from ..plant_sim_params import lockstep_params
+from ..hardware.params import loop_params
 
 NODE = Schema('hardware_bridge', [
     Param('ads.ams_net_id', 'str', '', '127.0.0.1.1.1',
@@ -21,23 +21,14 @@ NODE = Schema('hardware_bridge', [
           doc='time between reconnection attempts while the link is down'),
     Param('bridge.symbol_map', 'str', '', 'ads_symbols.yaml',
           doc='symbol map YAML; a relative path is taken from the config folder'),
-    *lockstep_params('bridge'),
-    Param('bridge.max_speed', 'float', 'rad/s', 837.758041, 1.0, 5000.0,
-          doc='commands beyond this magnitude are saturated and counted'),
-    Param('bridge.max_speed_rate', 'float', 'rad/s^2', 5.0e5, 10.0, 1.0e8,
-          doc='rate limit of the speed reference while armed'),
-    Param('bridge.watchdog_time', 'float', 's', 0.02, 1e-3, 10.0,
-          doc='no command for this long: zero speed written, reported'),
+    Param('bridge.backend', 'str', '', 'ads', choices=('ads', 'mock'),
+          doc='ads: the drive over ADS; mock: commands echoed into states (tests, no PLC)'),
+    *loop_params('bridge', command_timeout=0.02, autostart='inactive', startup_discovery=2.0,
+                 max_speed_rate=5.0e5, arm_max_command=10.0),
     Param('bridge.stale_limit', 'float', 's', 0.01, 1e-3, 10.0,
           doc='PLC cycle counter standing still (or reads failing) this long: state invalid'),
-    Param('bridge.arm_max_command', 'float', 'rad/s', 10.0, 0.0, 5000.0,
-          doc='arming is refused while |latest command| exceeds this'),
-    Param('bridge.arm_at_start', 'bool', '', False,
-          doc='arm by itself once the arming preconditions first hold (explicit operator '
-              'choice; default: arm through /eha/bridge/arm)'),
-    Param('bridge.startup_discovery', 'float', 's', 2.0, 0.0, 30.0,
-          doc='wait this long for other /eha/state publishers before refusing or starting'),
-    Param('bridge.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+    Param('bridge.mock_seed', 'int', '', 0, 0, 2**31 - 1,
+          doc='mock backend: seed of the position reading\'s noise'),
 ])
 
 SCHEMA = PLANT_SCHEMA + NODE

@@ -210,11 +210,13 @@ class Estimator:
 
     # ------------------------------------------------------------------ tick
     def update(self, position: float, motor_speed, pressure_a: float, pressure_b: float,
-               active_channel: int, ticks: int = 1) -> EstimateResult:
+               active_channel: int, ticks: int = 1, valid: bool = True) -> EstimateResult:
         """One measured state -> one estimate. ``ticks``: periods Ts since the previous state
         (more than 1 after lost states; the missing ones are predicted with the held speed).
         Predict-only (stale) steps taken since the previous state are provisional: they are
-        undone here and replaced by exactly ``ticks`` predictions."""
+        undone here and replaced by exactly ``ticks`` predictions. A state the plant side
+        marked not ``valid`` (a repeated or stale device sample) is predicted over with the
+        held speed, like a rejected one, and is no evidence for the fault detector."""
         if self._saved is not None:
             self.kf.x[:], self.kf.P[:], self.omega_prev, self.w_fric, p_last, fs = self._saved
             if p_last is not None:
@@ -223,14 +225,19 @@ class Estimator:
             self._saved = None
         position = float(position)
         pressure_a, pressure_b = float(pressure_a), float(pressure_b)
-        w, why_w = self._speed(motor_speed, active_channel)
-        pos_ok = self._position_ok(position)
-        pr_ok = self._pressure_ok(pressure_a, pressure_b)
-        reasons = [r for r in (why_w, '' if pos_ok else 'position',
-                               '' if pr_ok or not self.use_pressure else 'pressure') if r]
-        if not pos_ok:
+        if valid:
+            w, why_w = self._speed(motor_speed, active_channel)
+            pos_ok = self._position_ok(position)
+            pr_ok = self._pressure_ok(pressure_a, pressure_b)
+        else:
+            self.counters.bump('invalid_states')
+            w, why_w, pos_ok, pr_ok = self.omega_prev, 'invalid', False, False
+        reasons = [r for r in (why_w, '' if pos_ok or not valid else 'position',
+                               '' if pr_ok or not self.use_pressure or not valid else 'pressure')
+                   if r]
+        if valid and not pos_ok:
             self.counters.bump('rejected_position')
-        if not pr_ok and self.use_pressure:
+        if valid and not pr_ok and self.use_pressure:
             self.counters.bump('rejected_pressure')
         if pr_ok:
             self.pd_meas = pressure_a - pressure_b

@@ -1,12 +1,13 @@
-"""Bridge safety logic (no I/O, time passed in): arming, command limits, watchdog, staleness,
-link-loss latch. The drive only ever sees :meth:`Safety.speed_output`.
+"""The plant side's command gate (no I/O, time passed in): arming, the one saturation, rate
+limit, command timeout, link-loss latch. A backend only ever sees :meth:`CommandGate.speed_output`.
 
-- Unarmed (the start state), stale data, a tripped watchdog or a latched link fault: the
-  speed reference is 0 at once (a stop is never rate limited; the drive ramps it).
-- Armed: the latest good command, saturated at ``max_speed`` and rate limited at
-  ``max_rate`` (rad/s^2), starting from 0 on arming.
-- Arming needs: link up, no latched link fault, fresh data, no drive fault on the active
-  couple, and |latest command| <= ``arm_max_command`` (no jump on arming).
+- Unarmed (the start state: the node not ACTIVE), stale device data, commands stopped for
+  ``timeout`` or a latched link fault: the speed reference is 0 at once (a stop is never rate
+  limited; the drive ramps it).
+- Armed: the latest good command, saturated at ``max_speed`` (plant.drive.omega_max) and rate
+  limited at ``max_rate`` (rad/s^2), starting from 0 on arming.
+- Arming (the lifecycle's activate) needs: link up, no latched link fault, fresh data, no
+  drive fault on the active couple, and |latest command| <= ``arm_max_command`` (no jump).
 - Link loss disarms and latches; :meth:`reset` clears the latch once the link is back and the
   data fresh. Arming again is a separate, explicit step.
 """
@@ -17,14 +18,14 @@ import math
 from ..stats import Counters
 
 
-class Safety:
-    """Speed command gate between the controller and the PLC."""
+class CommandGate:
+    """Speed command gate between the controller and the hardware (every backend)."""
 
-    def __init__(self, max_speed: float, max_rate: float, watchdog_time: float,
+    def __init__(self, max_speed: float, max_rate: float, timeout: float,
                  arm_max_command: float, counters: Counters | None = None):
         self.max_speed = max_speed
         self.max_rate = max_rate
-        self.watchdog_time = watchdog_time
+        self.timeout = timeout
         self.arm_max_command = arm_max_command
         self.c = counters if counters is not None else Counters()
         self.armed = False
@@ -35,11 +36,12 @@ class Safety:
         self.drive_fault = False         # the active couple's drive reports a fault
         self.command = 0.0               # latest good command, saturated (rad/s)
         self.command_time = None         # when it arrived (s, caller's clock)
-        self.watchdog_tripped = False
+        self.command_seq = None          # its seq (the state it answers)
+        self.stale = False               # commands stopped for longer than timeout
         self.out = 0.0                   # last speed reference sent (rad/s)
 
     # ------------------------------------------------------------ inputs
-    def set_command(self, value: float, now: float) -> bool:
+    def set_command(self, value: float, now: float, seq: int | None = None) -> bool:
         """A command from the controller; non-finite ones are rejected (last good kept)."""
         if not math.isfinite(value):
             self.c.bump('rejected_commands')
@@ -47,11 +49,11 @@ class Safety:
         if abs(value) > self.max_speed:
             self.c.bump('saturated_commands')
             value = math.copysign(self.max_speed, value)
-        self.command, self.command_time = float(value), now
+        self.command, self.command_time, self.command_seq = float(value), now, seq
         return True
 
     def set_link(self, up: bool, reason: str = ''):
-        """Link state from the I/O thread; a loss disarms and latches a fault."""
+        """Link state from the loop; a loss disarms and latches a fault."""
         if self.link_up and not up:
             self.link_fault = True
             self.link_fault_reason = reason or 'link lost'
@@ -71,9 +73,9 @@ class Safety:
         if self.link_fault:
             return f'link fault latched ({self.link_fault_reason}): reset first'
         if not self.link_up:
-            return 'no ADS link to the PLC'
+            return 'no link to the drive'
         if not self.fresh:
-            return 'PLC data is stale'
+            return 'the drive\'s data is stale'
         if self.drive_fault:
             return 'the active drive reports a fault'
         if abs(self.command) > self.arm_max_command:
@@ -106,28 +108,28 @@ class Safety:
         if not self.link_fault:
             return True, 'no latched fault'
         if not self.link_up:
-            return False, 'reset refused: the ADS link is still down'
+            return False, 'reset refused: the link is still down'
         if not self.fresh:
-            return False, 'reset refused: PLC data is stale'
+            return False, 'reset refused: the drive\'s data is stale'
         self.link_fault = False
         self.link_fault_reason = ''
         self.c.bump('resets')
-        return True, 'link fault reset; arm again to move'
+        return True, 'link fault reset; activate (arm) again to move'
 
     # ------------------------------------------------------------ output
-    def watchdog(self, now: float) -> bool:
-        """True while commands have stopped for longer than watchdog_time."""
+    def commands_stale(self, now: float) -> bool:
+        """True while commands have stopped for longer than ``timeout`` (counted per event)."""
         t = self.command_time
-        tripped = t is not None and now - t > self.watchdog_time
-        if tripped and not self.watchdog_tripped:
-            self.c.bump('watchdog_trips')
-        self.watchdog_tripped = tripped
-        return tripped
+        stale = t is not None and now - t > self.timeout
+        if stale and not self.stale:
+            self.c.bump('command_timeouts')
+        self.stale = stale
+        return stale
 
     def speed_output(self, now: float, dt: float) -> float:
-        """Speed reference to write this cycle (rad/s)."""
+        """Speed reference to write this tick (rad/s)."""
         stop = (not self.armed or self.link_fault or not self.link_up or not self.fresh or
-                self.watchdog(now) or self.command_time is None)
+                self.commands_stale(now) or self.command_time is None)
         if stop:
             self.out = 0.0
             return 0.0
@@ -138,24 +140,3 @@ class Safety:
             delta = math.copysign(step, delta)
         self.out += delta
         return self.out
-
-
-class Staleness:
-    """Age of the PLC data from its cycle counter: fresh while the counter moved within
-    ``limit`` seconds and the last read succeeded."""
-
-    def __init__(self, limit: float):
-        self.limit = limit
-        self.cycle = None
-        self.changed_at = None
-
-    def update(self, plc_cycle: int, now: float) -> bool:
-        if plc_cycle != self.cycle:
-            self.cycle, self.changed_at = plc_cycle, now
-        return self.fresh(now)
-
-    def fresh(self, now: float) -> bool:
-        return self.changed_at is not None and now - self.changed_at <= self.limit
-
-    def age(self, now: float) -> float:
-        return math.inf if self.changed_at is None else now - self.changed_at

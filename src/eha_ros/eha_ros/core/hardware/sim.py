@@ -1,0 +1,72 @@
+"""``sim`` backend: the nonlinear EHA model (core.plant.EhaPlant, thesis ch. 3) as hardware."""
+from __future__ import annotations
+
+import math
+
+from ..plant import EhaPlant
+from ..stats import Counters
+from .interface import Hardware, Reading
+
+
+class SimHardware(Hardware):
+    """EhaPlant stepped once per write; load force and fault injection are sim-only inputs."""
+
+    kind = 'sim'
+    has_truth = True
+
+    def __init__(self, params: dict, counters: Counters, seed: int, initial_position: float,
+                 max_load: float):
+        self.p = params
+        self.c = counters
+        self.seed, self.initial_position, self.max_load = seed, initial_position, max_load
+        self.plant = None
+        self.Ts = params['plant.sim.Ts']
+        self.load = 0.0
+        self.r = Reading()
+
+    def configure(self) -> str:
+        self.plant = EhaPlant(self.p, seed=self.seed)
+        self.plant.reset(position=self.initial_position)
+        return (f'A_p={self.p["plant.cylinder.A_p"]:.4g} m^2, '
+                f'D_p={self.p["plant.pump.D_p"]:.4g} m^3/rad, '
+                f'substeps={self.p["plant.sim.substeps"]}')
+
+    def set_load(self, value: float) -> None:
+        """eha/sim/load_force: non-finite rejected, beyond max_load saturated (counted)."""
+        if not math.isfinite(value):
+            self.c.bump('rejected_loads')
+            return
+        if abs(value) > self.max_load:
+            self.c.bump('saturated_loads')
+            value = math.copysign(self.max_load, value)
+        self.load = value
+
+    def write(self, speed: float) -> None:
+        self.plant.step(speed, self.load)
+
+    def read(self, now: float) -> Reading:
+        m, tr, r = self.plant.measure(), self.plant.truth(), self.r
+        self._truth = tr
+        r.position = float(m.position)
+        r.pressure_a, r.pressure_b = float(m.pressure_a), float(m.pressure_b)
+        r.active_channel = int(m.active_channel)
+        r.bypass_open = float(tr.bypass_fraction) > 0.5
+        r.valid = bool(m.valid)
+        for i in (0, 1):
+            r.motor_speed[i] = float(m.motor_speed[i])
+            r.motor_current[i] = float(m.motor_current[i])
+            r.valve_open[i] = bool(m.valve_open[i] > 0.5)      # fractions -> open/closed
+            r.drive_enabled[i] = bool(m.drive_enabled[i])
+            r.drive_fault[i] = bool(m.drive_fault[i])
+        r.active_fault = r.drive_fault[r.active_channel]
+        return r
+
+    def truth(self):
+        """Ground truth of the last read (eha/sim/truth)."""
+        return self._truth
+
+    def select(self, channel, drive_enable, valve_open, bypass_open) -> None:
+        self.plant.select(channel, tuple(drive_enable), tuple(valve_open), bypass_open)
+
+    def inject_fault(self, name: str, channel: int, magnitude: float, duration: float):
+        return self.plant.inject_fault(name, channel, magnitude, duration)
