@@ -64,6 +64,7 @@ def test_a_node_that_dies_is_reported(tmp_path):
     (['--name', '../x'], 'expected a plain folder name'),
     (['--out', '/proc/eha'], 'cannot write the run folder'),
     (['--no-peer'], 'only applies to --plant bridge'),
+    (['--plant', 'bridge', '--activate'], '--activate only applies to --plant bridge --no-peer'),
 ])
 def test_bad_options_are_one_line(tmp_path, args, expect):
     r, folder, summary = run_stack(tmp_path, *args, timeout=60)

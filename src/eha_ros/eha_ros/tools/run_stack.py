@@ -66,7 +66,13 @@ def parse(argv):
                     help='port of --live (default 8765, from config/live.yaml); implies --live')
     ap.add_argument('--no-peer', action='store_true',
                     help='--plant bridge: do not start the ADS test peer (a real PLC answers at '
-                         'ads.host/ads.tcp_port); arming is then explicit: /eha/bridge/arm')
+                         'ads.host/ads.tcp_port); activation is then explicit (lifecycle '
+                         'change_state, /eha/bridge/arm, or --activate)')
+    ap.add_argument('--activate', action='store_true',
+                    help='--plant bridge --no-peer: activate (arm) the real drive by itself as '
+                         'soon as the arming conditions hold (explicit operator choice; default: '
+                         'it stays inactive until /hardware_bridge/change_state activate or '
+                         '/eha/bridge/arm)')
     ap.add_argument('--no-switch-manager', action='store_true',
                     help='leave the switch manager out (channel A drives throughout)')
     ap.add_argument('-p', dest='params', action='append', default=[], metavar='NODE:KEY:=VALUE',
@@ -120,7 +126,10 @@ def plan(args) -> dict:
     peer = args.plant == 'bridge' and not args.no_peer
     if args.plant == 'mock':
         extra.setdefault(plant, [])[:0] = ['-p', 'hardware_bridge:bridge.backend:=mock']
-    if peer or args.plant == 'mock':      # simulated: activate once the preconditions hold
+    if args.activate and not (args.plant == 'bridge' and args.no_peer):
+        raise UsageError('--activate only applies to --plant bridge --no-peer (a simulated '
+                         'plant side is activated at start)')
+    if peer or args.plant == 'mock' or args.activate:   # activate once the conditions hold
         extra.setdefault(plant, [])[:0] = ['-p', 'hardware_bridge:bridge.autostart:=active']
     return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant}
 
