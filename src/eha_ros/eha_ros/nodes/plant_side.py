@@ -109,14 +109,13 @@ def make_node(params: dict, program: Program):
             self.cmd_stale = False
             self.conflict = ''
             self.transition_note = ''             # why the last transition failed
-            self.pending_deactivate = ''          # reason, set by the loop (link loss)
+            self.retrying = False                 # an autostart configure being retried
             self.want_active = p[q + 'autostart'] == 'active'
             self.want_configured = p[q + 'autostart'] != 'unconfigured'
             self.next_configure = 0.0
             self.thread = None
             self.running = False
             self.done, self.exit_code = False, 0
-            self.has_sample = False
             self.fatal = ''                       # start-up: a symbol map the PLC refuses
             self.state_msg, self.truth_msg = ActuatorState(), PlantTruth()
             self.state_topic = self.resolve_topic_name('eha/state')
@@ -125,7 +124,7 @@ def make_node(params: dict, program: Program):
             qos = stream_qos()
             self.pub_state = self.create_publisher(ActuatorState, 'eha/state', qos)
             self.pub_truth = (self.create_publisher(PlantTruth, 'eha/sim/truth', qos)
-                              if getattr(self.hw, 'has_truth', False) else None)
+                              if self.hw.has_truth else None)
             self.pub_diag = diag.publisher(self)
             self.pub_clock = self.create_publisher(Clock, '/clock', 10) if self.lockstep else None
             self.plant_state = PlantState(self)
@@ -148,7 +147,7 @@ def make_node(params: dict, program: Program):
             self.create_timer(p[q + 'diagnostics_period'], self.publish_diagnostics)
             self.create_timer(SUPERVISE_PERIOD, self.supervise)
             if self.want_configured:
-                self.configure_now(startup=True)
+                self.configure_now()
             self.get_logger().info(
                 f'{program.name}: {self.hw.kind} backend, '
                 f'{"lock-step" if self.lockstep else "real time"} at {1.0 / self.Ts:.0f} Hz; '
@@ -158,18 +157,23 @@ def make_node(params: dict, program: Program):
         def state_label(self) -> str:
             return self._state_machine.current_state[1]
 
-        def configure_now(self, startup: bool = False):
-            """Autostart: configure; a device not reachable yet is retried (logged once)."""
-            self.next_configure = time.monotonic() + getattr(self.hw, 'retry_period', 0.5)
-            first = not self.transition_note
-            self.trigger_configure()
+        def configure_now(self):
+            """Autostart: configure; a device not reachable yet is retried every retry_period
+            (its reason logged once, again only when it changes)."""
+            period = self.hw.retry_period
+            self.next_configure = time.monotonic() + period
+            first_failure = not self.transition_note
+            self.retrying = not first_failure
+            try:
+                self.trigger_configure()
+            finally:
+                self.retrying = False
             if self.fatal:
                 raise UsageError(self.fatal)      # start-up: one line, exit 2
             if self.state_label() == 'inactive':
                 self.want_configured = False
-            elif startup or first:
-                self.get_logger().warning(f'configure failed: {self.transition_note}; '
-                                          'retrying')
+            elif first_failure:
+                self.get_logger().info(f'configure: retried every {period:g} s')
 
         @transition
         def on_configure(self, state):
@@ -183,7 +187,6 @@ def make_node(params: dict, program: Program):
                     return Ret.FAILURE
                 return self.refuse('configure', str(err))
             self.gate.set_link(self.hw.link_up)
-            self.has_sample = False
             with self.hw_lock:
                 r = self.hw.read(self.now())
             self.fill_state(r)
@@ -196,6 +199,8 @@ def make_node(params: dict, program: Program):
 
         @transition
         def on_activate(self, state):
+            if self.conflict:
+                return self.refuse('activate', self.conflict)
             with self.lock:
                 ok, text = self.gate.arm()
             if not ok:
@@ -205,9 +210,8 @@ def make_node(params: dict, program: Program):
 
         @transition
         def on_deactivate(self, state):
-            reason = self.pending_deactivate or 'requested'
-            self.pending_deactivate = ''
-            with self.lock:
+            with self.lock:               # the gate may have disarmed itself (link, conflict)
+                reason = 'requested' if self.gate.armed else self.gate.disarm_reason
                 self.gate.disarm(reason)
             self.plant_state.set(False)
             return self.done_transition('inactive', f'zero speed, disarmed ({reason})')
@@ -231,9 +235,11 @@ def make_node(params: dict, program: Program):
             return Ret.SUCCESS
 
         def refuse(self, what: str, why: str):
-            self.transition_note = f'{what} refused: {why}'
+            note = f'{what} refused: {why}'
             self.c.bump('transitions_refused')
-            self.get_logger().warning(self.transition_note)
+            if not (self.retrying and note == self.transition_note):
+                self.get_logger().warning(note)
+            self.transition_note = note
             self.publish_diagnostics()
             return Ret.FAILURE
 
@@ -261,11 +267,8 @@ def make_node(params: dict, program: Program):
         def supervise(self):
             """Carries out what the loop or autostart asked for (executor thread)."""
             label = self.state_label()
-            if self.pending_deactivate and label == 'active':
-                self.trigger_deactivate()
-            elif label == 'active' and not self.gate.armed:
-                self.pending_deactivate = 'the gate disarmed'
-                self.trigger_deactivate()
+            if label == 'active' and not self.gate.armed:
+                self.trigger_deactivate()         # the gate disarmed itself: link, conflict
             elif self.want_configured and label == 'unconfigured' and \
                     time.monotonic() >= self.next_configure:
                 self.configure_now()
@@ -292,7 +295,7 @@ def make_node(params: dict, program: Program):
             self.c.bump('channel_selects')
 
         def on_fault(self, req, resp):
-            if self.hw is None or self.state_label() == 'unconfigured':
+            if self.state_label() == 'unconfigured':
                 resp.success, resp.message = False, 'not configured'
                 return resp
             with self.hw_lock:
@@ -311,8 +314,6 @@ def make_node(params: dict, program: Program):
                     ok, text = True, 'already armed'
                 elif label != 'inactive':
                     ok, text = False, f'arming refused: {label} (configure first)'
-                elif self.conflict:
-                    ok, text = False, f'arming refused: {self.conflict}'
                 else:
                     self.trigger_activate()
                     ok = self.state_label() == 'active'
@@ -365,10 +366,8 @@ def make_node(params: dict, program: Program):
             if self.gate.link_up:
                 with self.lock:
                     was = self.gate.armed
-                    self.gate.set_link(False, getattr(self.hw, 'lost', '') or self.hw.last_error)
-                self.plant_state.set(False)
-                if was:
-                    self.pending_deactivate = 'link lost'
+                    self.gate.set_link(False, self.hw.lost or self.hw.last_error)
+                self.plant_state.set(False)             # supervise deactivates the node
                 self.get_logger().error(
                     f'link to the drive lost: {self.gate.link_fault_reason}'
                     f'{"; disarmed" if was else ""}; fault latched: reset with eha/bridge/reset '
@@ -391,9 +390,8 @@ def make_node(params: dict, program: Program):
             while self.running:
                 if not self.hw.link_up:
                     if not self.link_check():
-                        if self.has_sample:       # invalid states at the retry rate
-                            self.state_msg.valid = False
-                            self.publish_state()
+                        self.state_msg.valid = False      # invalid states at the retry rate
+                        self.publish_state()
                         continue
                     deadline = time.monotonic_ns()
                 deadline += period_ns
@@ -464,7 +462,7 @@ def make_node(params: dict, program: Program):
                 fresh = self.hw.fresh(now)
             with self.lock:
                 self.k += 1
-                self.gate.set_data(fresh and up, r.active_fault)
+                self.gate.set_data(fresh, r.active_fault)
                 armed = self.gate.armed
             self.publish_state()
             self.plant_state.set(armed)
@@ -492,7 +490,6 @@ def make_node(params: dict, program: Program):
                 valve[i] = r.valve_open[i]
                 enabled[i] = r.drive_enabled[i]
                 fault[i] = r.drive_fault[i]
-            self.has_sample = True
 
         def stamp(self):
             if self.lockstep:

@@ -229,16 +229,15 @@ class Estimator:
             w, why_w = self._speed(motor_speed, active_channel)
             pos_ok = self._position_ok(position)
             pr_ok = self._pressure_ok(pressure_a, pressure_b)
+            reasons = [r for r in (why_w, '' if pos_ok else 'position',
+                                   '' if pr_ok or not self.use_pressure else 'pressure') if r]
+            if not pos_ok:
+                self.counters.bump('rejected_position')
+            if not pr_ok and self.use_pressure:
+                self.counters.bump('rejected_pressure')
         else:
             self.counters.bump('invalid_states')
-            w, why_w, pos_ok, pr_ok = self.omega_prev, 'invalid', False, False
-        reasons = [r for r in (why_w, '' if pos_ok or not valid else 'position',
-                               '' if pr_ok or not self.use_pressure or not valid else 'pressure')
-                   if r]
-        if valid and not pos_ok:
-            self.counters.bump('rejected_position')
-        if valid and not pr_ok and self.use_pressure:
-            self.counters.bump('rejected_pressure')
+            w, pos_ok, pr_ok, reasons = self.omega_prev, False, False, ['invalid']
         if pr_ok:
             self.pd_meas = pressure_a - pressure_b
         if not self.started:

@@ -30,7 +30,6 @@ class AdsHardware(Hardware):
     def __init__(self, params: dict, counters: Counters, stale_limit: float):
         p = self.p = params
         self.c = counters
-        self.Ts = p['plant.sim.Ts']
         self.smap = load_symbol_map(resolve_path(p['bridge.symbol_map'], default_config_dir()))
         self.link = AdsLink(self.smap, p['ads.ams_net_id'], p['ads.ams_port'], p['ads.host'],
                             p['ads.tcp_port'], p['ads.timeout'], p['ads.sum_mode'])

@@ -38,6 +38,7 @@ class CommandGate:
         self.command_time = None         # when it arrived (s, caller's clock)
         self.command_seq = None          # its seq (the state it answers)
         self.stale = False               # commands stopped for longer than timeout
+        self.disarm_reason = ''          # why the last arming ended
         self.out = 0.0                   # last speed reference sent (rad/s)
 
     # ------------------------------------------------------------ inputs
@@ -101,6 +102,7 @@ class CommandGate:
         self.out = 0.0
         if was:
             self.c.bump('disarms')
+            self.disarm_reason = reason
         return True, f'disarmed ({reason})' if was else 'already disarmed'
 
     def reset(self) -> tuple[bool, str]:

@@ -31,7 +31,9 @@ class Hardware:
     """Base of the backends. ``kind``: 'sim', 'ads' or 'mock'."""
 
     kind = ''
-    Ts = 1e-3                           # s: the tick (plant.sim.Ts)
+    has_truth = False                   # serves eha/sim/truth (truth())
+    retry_period = 0.5                  # s between autostart configure attempts
+    lost = ''                           # why the link was declared lost ('' while up)
 
     # ---- lifecycle (executor thread; the loop does not run during configure/cleanup)
     def configure(self) -> str:

@@ -20,7 +20,6 @@ class SimHardware(Hardware):
         self.c = counters
         self.seed, self.initial_position, self.max_load = seed, initial_position, max_load
         self.plant = None
-        self.Ts = params['plant.sim.Ts']
         self.load = 0.0
         self.r = Reading()
 
