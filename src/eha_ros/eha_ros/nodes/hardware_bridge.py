@@ -25,7 +25,8 @@ def hardware(p: dict, counters):
     return AdsHardware(p, counters, p['bridge.stale_limit'])
 
 
-PROGRAM = Program('hardware_bridge', SCHEMA, 'bridge', hardware, bridge_services=True)
+PROGRAM = Program('hardware_bridge', SCHEMA, 'bridge', hardware, bridge_services=True,
+                  exclusive=True)
 
 
 def make_node(params: dict):

@@ -46,12 +46,15 @@ SUPERVISE_PERIOD = 0.02        # s: pending lifecycle transitions are carried ou
 @dataclass(frozen=True)
 class Program:
     """One executable built on this program: node name, parameters and their loop prefix, the
-    backend factory (params, counters) -> Hardware, and whether it serves eha/bridge/*."""
+    backend factory (params, counters) -> Hardware, whether it serves eha/bridge/*, and whether
+    it is exclusive (a real drive: refuses to start beside another eha/state publisher and
+    disarms when one appears; a simulator is not: run_stack keeps one stack per domain)."""
     name: str
     schema: Schema
     prefix: str
     hardware: Callable
     bridge_services: bool = False
+    exclusive: bool = False
 
 
 def state_publishers(node, topic: str) -> list[str]:
@@ -119,7 +122,8 @@ def make_node(params: dict, program: Program):
             self.fatal = ''                       # start-up: a symbol map the PLC refuses
             self.state_msg, self.truth_msg = ActuatorState(), PlantTruth()
             self.state_topic = self.resolve_topic_name('eha/state')
-            self.refuse_if_other_plant(p[q + 'startup_discovery'])
+            if program.exclusive:
+                self.refuse_if_other_plant(p[q + 'startup_discovery'])
 
             qos = stream_qos()
             self.pub_state = self.create_publisher(ActuatorState, 'eha/state', qos)
@@ -560,7 +564,8 @@ def make_node(params: dict, program: Program):
 
         @diag.reader
         def publish_diagnostics(self):
-            self.check_conflict()
+            if program.exclusive:
+                self.check_conflict()
             now = self.now()
             g = self.gate
             per, ex = self.period.summary(), self.exec_time.summary()

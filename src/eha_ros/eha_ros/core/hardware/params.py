@@ -8,12 +8,16 @@ AUTOSTART = ('unconfigured', 'inactive', 'active')
 
 
 def loop_params(prefix: str, *, command_timeout: float, autostart: str,
-                startup_discovery: float, max_speed_rate: float,
-                arm_max_command: float) -> list:
+                max_speed_rate: float, arm_max_command: float,
+                startup_discovery: float | None = None) -> list:
     """The loop's switches: lock-step (publishes /clock, steps per command, the start gate
     holds tick 0), the lifecycle at start-up, and the command gate (core.hardware.gate; the
-    saturation is plant.drive.omega_max)."""
-    return [
+    saturation is plant.drive.omega_max). ``startup_discovery`` only for an exclusive plant
+    side (nodes.plant_side.Program.exclusive: a real drive)."""
+    exclusive = [] if startup_discovery is None else [
+        Param(f'{prefix}.startup_discovery', 'float', 's', startup_discovery, 0.0, 30.0,
+              doc='wait this long for other eha/state publishers before refusing to start')]
+    return exclusive + [
         Param(f'{prefix}.lockstep', 'bool', '', False,
               doc='step only when the command of the previous state arrived; publish /clock'),
         Param(f'{prefix}.lockstep_timeout', 'float', 's', 1.0, 1e-3, 60.0,
@@ -28,8 +32,6 @@ def loop_params(prefix: str, *, command_timeout: float, autostart: str,
               doc='lifecycle state to reach by itself at start-up: unconfigured (wait for a '
                   'manager, e.g. run_stack), inactive (configured: states, no commands '
                   'applied) or active (commands applied once activation is allowed)'),
-        Param(f'{prefix}.startup_discovery', 'float', 's', startup_discovery, 0.0, 30.0,
-              doc='wait this long for other eha/state publishers before refusing to start'),
         Param(f'{prefix}.command_timeout', 'float', 's', command_timeout, 1e-3, 10.0,
               doc='no command for this long: zero speed applied, reported'),
         Param(f'{prefix}.max_speed_rate', 'float', 'rad/s^2', max_speed_rate, 10.0, 1.0e9,
