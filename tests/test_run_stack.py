@@ -186,13 +186,22 @@ def test_nodes_die_with_run_stack_even_on_sigkill(tmp_path, ros_node):
         assert len(kids) == 5, kids          # recorder, plant_sim, estimator, controller, manager
         st.proc.kill()
         st.proc.wait(timeout=10)
-        assert wait_for(lambda: not any(map(_alive, kids)), 30), [k for k in kids if _alive(k)]
+        assert wait_for(lambda: not any(map(_alive, kids)), 30), \
+            [(k, _cmdline(k)) for k in kids if _alive(k)]
     finally:
         for k in st.children():
             os.kill(k, signal.SIGKILL)
     with open(st.folder / 'recording.mcap', 'rb') as fh:
         stats = make_reader(fh).get_summary().statistics
     assert stats.message_count > 1000, stats      # ~4 topics at 1 kHz for >= 1.5 s of sim time
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        with open(f'/proc/{pid}/cmdline', 'rb') as fh:
+            return fh.read().replace(b'\0', b' ').decode()[:200]
+    except OSError:
+        return ''
 
 
 def _child(st, name):

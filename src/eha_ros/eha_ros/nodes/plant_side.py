@@ -176,6 +176,7 @@ def make_node(params: dict, program: Program):
                 raise UsageError(self.fatal)      # start-up: one line, exit 2
             if self.state_label() == 'inactive':
                 self.want_configured = False
+                self.activate_when_allowed()      # autostart active: before the first tick
             elif first_failure:
                 self.get_logger().info(f'configure: retried every {period:g} s')
 
@@ -190,11 +191,14 @@ def make_node(params: dict, program: Program):
                     self.fatal = str(err)         # start-up: the one error line, exit 2
                     return Ret.FAILURE
                 return self.refuse('configure', str(err))
-            self.gate.set_link(self.hw.link_up)
+            now = self.now()
             with self.hw_lock:
-                r = self.hw.read(self.now())
-            self.fill_state(r)
-            self.publish_state()                  # state(k): the lock-step loop's first
+                r = self.hw.read(now)
+                fresh = self.hw.fresh(now)
+            with self.lock:                   # activation may follow before the first tick
+                self.gate.set_link(self.hw.link_up)
+                self.gate.set_data(fresh, r.active_fault)
+            self.fill_state(r)                    # state(k): the loop publishes it first
             self.running = True
             self.thread = threading.Thread(target=self.loop, name='plant_loop', daemon=True)
             # the real-time loop starts once the executor spins (start-up is no overrun)
@@ -253,11 +257,14 @@ def make_node(params: dict, program: Program):
             self.publish_diagnostics()
             return Ret.SUCCESS
 
-        def stop_loop(self):
-            """Zero speed, loop thread joined (outside every lock), device released."""
+        def stop_loop(self, announce: bool = True):
+            """Zero speed, loop thread joined (outside every lock), device released;
+            ``announce``: INACTIVE on eha/plant_state (a transition; not at process exit, where
+            the controller would answer the last states with zeros depending on timing)."""
             with self.lock:
                 self.gate.disarm('stopped')
-            self.plant_state.set(False)
+            if announce:
+                self.plant_state.set(False)
             self.running = False
             self.go.set()
             if self.thread is not None and self.thread.is_alive() and \
@@ -276,7 +283,13 @@ def make_node(params: dict, program: Program):
             elif self.want_configured and label == 'unconfigured' and \
                     time.monotonic() >= self.next_configure:
                 self.configure_now()
-            elif self.want_active and label == 'inactive' and not self.gate.arm_refusal():
+            elif label == 'inactive':
+                self.activate_when_allowed()
+
+        def activate_when_allowed(self):
+            """Autostart active: activate once the arming conditions hold (a simulator at once,
+            so a lock-step run is the same from tick 0 whatever the executor's timing)."""
+            if self.want_active and not self.gate.arm_refusal():
                 self.want_active = False
                 self.trigger_activate()
 
@@ -285,8 +298,10 @@ def make_node(params: dict, program: Program):
             if msg.seq == self.k and self.gate.command_seq != self.k and self.state_time:
                 self.latency.add(time.perf_counter() - self.state_time)
             with self.lock:
-                self.gate.set_command(msg.motor_speed_ref, self.now(), msg.seq)
-                if self.lockstep and msg.seq == self.k:
+                if not self.lockstep:
+                    self.gate.set_command(msg.motor_speed_ref, self.now(), msg.seq)
+                elif msg.seq == self.k:       # lock-step: tick k applies command(k), no other
+                    self.gate.set_command(msg.motor_speed_ref, self.now(), msg.seq)
                     self.go_seq = msg.seq
                     self.go.set()
 
@@ -346,9 +361,12 @@ def make_node(params: dict, program: Program):
             return self.k * self.Ts if self.lockstep else time.monotonic()
 
         def start_loop(self):
+            """Once the executor spins: state(k) out (an autostart activation is out before it,
+            so a controller sees ACTIVE first), then the loop thread."""
             self._starter.cancel()
             self.destroy_timer(self._starter)
             if self.thread is not None and self.running:
+                self.publish_state()
                 self.thread.start()
 
         def loop(self):
@@ -604,6 +622,6 @@ def make_node(params: dict, program: Program):
 
         def close(self):
             if self.running or self.thread is not None:
-                self.stop_loop()
+                self.stop_loop(announce=False)
 
     return PlantSide()
