@@ -198,7 +198,7 @@ def make_node(params: dict, program: Program):
             with self.lock:                   # activation may follow before the first tick
                 self.gate.set_link(self.hw.link_up)
                 self.gate.set_data(fresh, r.active_fault)
-            self.fill_state(r)                    # state(k): the loop publishes it first
+            self.fill_state(r)                    # state(k): lock-step publishes it first
             self.running = True
             self.thread = threading.Thread(target=self.loop, name='plant_loop', daemon=True)
             # the real-time loop starts once the executor spins (start-up is no overrun)
@@ -361,12 +361,9 @@ def make_node(params: dict, program: Program):
             return self.k * self.Ts if self.lockstep else time.monotonic()
 
         def start_loop(self):
-            """Once the executor spins: state(k) out (an autostart activation is out before it,
-            so a controller sees ACTIVE first), then the loop thread."""
             self._starter.cancel()
             self.destroy_timer(self._starter)
             if self.thread is not None and self.running:
-                self.publish_state()
                 self.thread.start()
 
         def loop(self):
@@ -442,7 +439,9 @@ def make_node(params: dict, program: Program):
                     time.sleep(0.01)
 
         def lockstep_loop(self):
-            """Step on command(k); re-publish state(k) when it does not come."""
+            """Step on command(k); re-publish state(k) when it does not come. State(k) goes out
+            first (after an autostart activation: a controller sees ACTIVE before it)."""
+            self.publish_state()
             while self.running:
                 if not self.hw.link_up:
                     if self.link_check():
