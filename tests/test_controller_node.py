@@ -129,6 +129,71 @@ def test_inactive_while_the_plant_side_is_and_bumpless_when_it_becomes_active(ct
     ctl.ref_pub.publish(ctl.Ref(position=0.0))
 
 
+def test_managed_controller_change_state_inactive_active_bumpless(ros_node):
+    """Issue 18: the controller as a managed node, driven by an independent client over
+    lifecycle_msgs ChangeState/GetState (control.autostart unconfigured, as run_stack starts
+    it). Unconfigured and inactive it answers every estimate with zero and integrates nothing
+    under a 5 mm reference; active it drives towards it from a bumpless start; deactivated it
+    is back at zero at once; activated again (the piston meanwhile at 2 mm) it starts from
+    the piston position, not from the wound-up state."""
+    from lifecycle_msgs.srv import ChangeState, GetState
+    proc = start_process(controller_cmd('-p', 'controller:control.autostart:=unconfigured'))
+    est = FakeEstimator(ros_node)
+    change = ros_node.create_client(ChangeState, '/controller/change_state')
+    get = ros_node.create_client(GetState, '/controller/get_state')
+
+    def call(client, req):
+        assert client.wait_for_service(timeout_sec=30), client.srv_name
+        fut = client.call_async(req)
+        assert wait_for(fut.done, 20), client.srv_name
+        return fut.result()
+
+    def transition(label):
+        req = ChangeState.Request()
+        req.transition.label = label
+        ok = call(change, req).success
+        return ok, call(get, GetState.Request()).current_state.label
+
+    def outputs(ticks=600, since=None):
+        """Answers to the next ``ticks`` estimates (``since``: from this command on)."""
+        first = est.seq
+        n = len(est.commands) if since is None else since
+        assert wait_for(lambda: est.seq > first + ticks, 10)
+        return np.array([c.motor_speed_ref for c in est.commands[n:] if c.seq > 0])[3:]
+
+    try:
+        assert wait_for(lambda: len(est.commands) > 100, 60), 'controller does not answer'
+        wait_matched(est.ref_pub)
+        assert call(get, GetState.Request()).current_state.label == 'unconfigured'
+        est.ref_pub.publish(est.Ref(position=0.005))
+        seen = {'unconfigured': outputs()}
+        assert transition('configure') == (True, 'inactive')
+        seen['inactive'] = outputs()
+        n = len(est.commands)
+        assert transition('activate') == (True, 'active')
+        seen['active'] = outputs(since=n)
+        assert transition('deactivate') == (True, 'inactive')
+        seen['deactivated'] = outputs()
+        est.position = 0.002                       # the piston moved meanwhile
+        n = len(est.commands)
+        assert transition('activate') == (True, 'active')
+        seen['again'] = outputs(since=n)
+        assert transition('configure') == (False, 'active')      # not from 'active'
+        assert wait_for(lambda: est.diags and est.diags[-1].get('lifecycle') == 'active', 5)
+        print('controller lifecycle: ' + ', '.join(
+            f'{k} |u| max {np.abs(u).max():.1f} rad/s over {len(u)} answers'
+            for k, u in seen.items()))
+        for k in ('unconfigured', 'inactive', 'deactivated'):
+            assert len(seen[k]) > 500 and np.all(seen[k] == 0.0), k
+        for k in ('active', 'again'):              # bumpless: the first answers near zero
+            u = seen[k][np.nonzero(seen[k])[0][0]:]
+            assert abs(u[0]) < 50.0 and u[-1] > 0.0 and np.abs(u).max() > 100.0, (k, u[:5])
+    finally:
+        est.close()
+        code, out, err = stop_process(proc)
+        assert 'Traceback' not in err, err
+
+
 def test_stale_estimates_trip_watchdog(ctl):
     time.sleep(0.3)
     ctl.stale = True

@@ -44,4 +44,4 @@ def test_launch_file_uses_launch_entries_and_declares_the_options():
         {f.name for f in tree.body if isinstance(f, ast.FunctionDef)}
     keys = next(n for n in tree.body if isinstance(n, ast.Assign) and n.targets[0].id == 'ARGS')
     declared = {k.value for k in keys.value.keys}
-    assert {'plant', 'mode', 'structure', 'peer', 'sweep', 'config_dir'} <= declared
+    assert {'plant', 'mode', 'structure', 'peer', 'activate', 'sweep', 'config_dir'} <= declared

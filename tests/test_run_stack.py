@@ -24,6 +24,14 @@ def run_stack(tmp_path, *args, timeout=180):
     return r, folder, summary
 
 
+# the plant side's loop status, written once (nodes/plant_side.py) for every backend
+LOOP_KEYS = {'state', 'active', 'backend', 'ticks', 'sim_time_s', 'period_mean_s', 'period_p99_s',
+             'period_max_s', 'exec_mean_s', 'exec_p99_s', 'exec_max_s', 'latency_p50_s',
+             'latency_p99_s', 'latency_max_s', 'answers', 'command_stale', 'speed_ref_out',
+             'link_up', 'data_fresh', 'link_fault_latched', 'link_fault_reason', 'last_error',
+             'conflict', 'transition_refused'}
+
+
 @pytest.mark.parametrize('mode, procs', [
     ('realtime', {'eha_loop'}),
     ('lockstep', {'plant_sim', 'estimator', 'controller', 'switch_manager'})])
@@ -35,6 +43,7 @@ def test_runs_for_duration_and_stops_cleanly(tmp_path, mode, procs):
     for p in procs:
         assert (folder / 'logs' / f'{p}.log').exists()
     loop = summary['diagnostics']['plant_sim: loop']
+    assert LOOP_KEYS <= set(loop) and loop['backend'] == 'sim'
     assert loop['ticks'] > 500                 # the loop ran (lock-step: as fast as DDS allows)
     assert summary['stop_reason'] == 'duration' and summary['wall_s'] >= 12
     assert set(summary['cpu_share']) == procs
@@ -42,6 +51,33 @@ def test_runs_for_duration_and_stops_cleanly(tmp_path, mode, procs):
         assert any(k.startswith(node) for k in summary['diagnostics']), node
     # the plant's latched ACTIVE reached the controller (composed: replayed in-process)
     assert summary['diagnostics']['controller: loop']['plant_state'] == 'active'
+    # run_stack brought the managed nodes up: plant configured, controller configured and
+    # activated, then the plant activated; each printed once, states on /diagnostics
+    order = [ln.split('lifecycle: ', 1)[1] for ln in r.stdout.splitlines()
+             if ln.startswith('run_stack: lifecycle: ')]
+    assert order == ['plant_sim unconfigured -> inactive (configure)',
+                     'controller unconfigured -> inactive (configure)',
+                     'controller inactive -> active (activate)',
+                     'plant_sim inactive -> active (activate)'], r.stdout
+    assert summary['diagnostics']['run_stack: lifecycle'] == {
+        'plant_sim': 'active', 'controller': 'active', 'transitions': 4}
+    assert summary['diagnostics']['controller: loop']['lifecycle'] == 'active'
+
+
+def test_a_transition_that_cannot_be_carried_out_fails_the_run_with_its_reason(tmp_path):
+    """A real drive whose PLC does not answer: run_stack retries the configure (the reason
+    printed once) until --start-timeout, then fails with the bridge's reason (exit 1)."""
+    from test_bridge_core import free_port
+    r, folder, summary = run_stack(tmp_path, '--plant', 'bridge', '--no-peer', '--start-timeout',
+                                   '10', '-p', f'hardware_bridge:ads.tcp_port:={free_port()}')
+    print(r.stdout[-800:])
+    assert r.returncode == 1
+    retried = [ln for ln in r.stdout.splitlines() if 'retried every' in ln]
+    assert retried[0].startswith('run_stack: lifecycle: hardware_bridge configure refused: PLC ')
+    assert 'not reachable' in retried[0] and len(retried) == 1, retried
+    assert 'run_stack: FAILED: stopped (lifecycle: hardware_bridge configure refused: ' in r.stdout
+    assert summary['stop_reason'].startswith('lifecycle: hardware_bridge configure refused: ')
+    assert summary['diagnostics']['run_stack: lifecycle']['hardware_bridge'] == 'unconfigured'
 
 
 def test_a_node_that_dies_is_reported(tmp_path):
@@ -64,7 +100,7 @@ def test_a_node_that_dies_is_reported(tmp_path):
     (['--name', '../x'], 'expected a plain folder name'),
     (['--out', '/proc/eha'], 'cannot write the run folder'),
     (['--no-peer'], 'only applies to --plant bridge'),
-    (['--plant', 'bridge', '--activate'], '--activate only applies to --plant bridge --no-peer'),
+    (['--plant', 'mock', '--activate'], '--activate only applies to --plant bridge'),
 ])
 def test_bad_options_are_one_line(tmp_path, args, expect):
     r, folder, summary = run_stack(tmp_path, *args, timeout=60)
@@ -76,12 +112,13 @@ def test_bad_options_are_one_line(tmp_path, args, expect):
 
 def test_plant_swapped_for_the_bridge_and_the_ads_test_peer(tmp_path):
     """--plant bridge changes only the plant side: ads_peer (the simulated PLC) + the bridge in
-    place of plant_sim, armed at start because the PLC is the simulated one."""
-    r, folder, summary = run_stack(tmp_path, '--plant', 'bridge', '--duration', '6')
+    place of plant_sim; --activate: run_stack activates (arms) it after the controller."""
+    r, folder, summary = run_stack(tmp_path, '--plant', 'bridge', '--activate', '--duration', '6')
     assert r.returncode == 0, r.stdout[-1500:] + r.stderr[-1500:]
     assert set(summary['exit_codes']) == {'ads_peer', 'eha_loop'}
     assert '--plant bridge' in summary['processes']['eha_loop']
     link = summary['diagnostics']['hardware_bridge: loop']
+    assert LOOP_KEYS <= set(link) and link['backend'] == 'ads'    # plant_sim's keys, and the PLC's
     assert link['active'] is True and link['state'] == 'active' and link['link_up'] is True and link['ticks'] > 100, link
     assert 'plant_sim: loop' not in summary['diagnostics']
     for node in ('estimator', 'controller', 'switch_manager'):
@@ -286,7 +323,7 @@ def test_bridge_link_loss_fails_the_run(tmp_path):
     stall within 0.2 s (ERROR, safe state, the run stops, exit 1); the bridge's own link
     ERROR follows when its link-loss count is reached before the stop."""
     import time
-    st = Started(tmp_path, 'link', '--plant', 'bridge', '--duration', '60')
+    st = Started(tmp_path, 'link', '--plant', 'bridge', '--activate', '--duration', '60')
     peer = None
     try:
         assert st.running(), st.lines
@@ -313,7 +350,7 @@ def test_processes_in_real_time_are_stopped_when_they_cannot_hold_the_loop(tmp_p
     ticks. It is never left running on a lossy loop with rc 0."""
     r, folder, summary = run_stack(tmp_path, '--structure', 'processes', '--duration', '20')
     loop = summary['diagnostics']['plant_sim: loop']
-    lost = loop['commands_not_for_previous_tick'] / max(loop['ticks'], 1)
+    lost = loop.get('commands_not_for_previous_tick', 0) / max(loop['ticks'], 1)
     print(f'processes in real time: {summary["stop_reason"]} after {summary["wall_s"]:.1f} s; '
           f'plant lost {100 * lost:.1f} % of {loop["ticks"]} ticks')
     if summary['stop_reason'].startswith(('loop supervisor: unanswered: the loop cannot hold',

@@ -5,7 +5,9 @@
 
 The processes, their executables and arguments come from eha_ros.tools.run_stack
 (launch_entries), so the launch file and run_stack start the same stack; plant:=bridge swaps
-only the plant side (hardware_bridge + the ADS test peer unless peer:=false).
+only the plant side (hardware_bridge + the ADS test peer unless peer:=false). Launch has no
+lifecycle manager here: the nodes reach their states by themselves (autostart parameters), a
+simulated stack active, a real drive inactive unless activate:=true.
 """
 import os
 
@@ -21,6 +23,8 @@ ARGS = {'plant': ('sim', 'sim: plant_sim | bridge: hardware_bridge to the drive'
         'mode': ('realtime', 'realtime | lockstep'),
         'structure': ('auto', 'auto | composed | processes (see docs/nodes/eha_loop.md)'),
         'peer': ('true', 'bridge: start the ADS test peer (false: a real PLC answers)'),
+        'activate': ('false', 'bridge: activate (arm) the drive by itself once the arming '
+                              'conditions hold (default: inactive until change_state activate)'),
         'sweep': ('false', 'also run the sweep node'),
         'config_dir': (os.environ.get('EHA_CONFIG_DIR', default_config_dir()),
                        'folder with the YAML files of config/')}
@@ -32,6 +36,8 @@ def processes(context):
             value['structure'], '--config', value['config_dir']]
     if value['peer'].lower() == 'false' and value['plant'] == 'bridge':
         argv.append('--no-peer')
+    if value['activate'].lower() == 'true' and value['plant'] == 'bridge':
+        argv.append('--activate')
     if value['sweep'].lower() == 'true':
         argv.append('--sweep')
     actions = []

@@ -170,16 +170,20 @@ PLANT_STATE_TOPIC = 'eha/plant_state'
 
 class PlantState:
     """The plant side's state on ``eha/plant_state`` (lifecycle_msgs/State, latched): ACTIVE
-    while it applies eha/command (plant_sim: always; hardware_bridge: while armed), INACTIVE
-    otherwise. The controller is inactive (zero output, no integration) while it is not
-    ACTIVE and starts from the piston position when it becomes ACTIVE. Published on every
-    change, from whichever thread saw it."""
+    while it applies eha/command (its lifecycle state is ACTIVE: armed), INACTIVE otherwise.
+    The controller is inactive (zero output, no integration) while it is not ACTIVE and
+    starts from the piston position when it becomes ACTIVE. Published on every change, from
+    whichever thread saw it."""
 
     def __init__(self, node):
         from lifecycle_msgs.msg import State
         self.State = State
+        self.node = node
         self.pub = node.create_publisher(State, PLANT_STATE_TOPIC, latched_qos())
         self.active = None
+        # a composed process delivers to co-located subscribers under its callback lock:
+        # taken first, so a thread publishing here and one holding it cannot deadlock
+        self.outer = node.callback_lock
         self.lock = threading.Lock()
 
     def set(self, active: bool) -> bool:
@@ -188,13 +192,25 @@ class PlantState:
         S, active = self.State, bool(active)
         if active == self.active:
             return False
-        with self.lock:
+        with self.outer, self.lock:
             if active == self.active:
                 return False
-            self.active = active
             self.pub.publish(S(id=S.PRIMARY_STATE_ACTIVE, label='active') if active else
                              S(id=S.PRIMARY_STATE_INACTIVE, label='inactive'))
+            self.active = active                  # after the publication (acked() follows it)
         return True
+
+    def acked(self, timeout: float) -> bool:
+        """True once every subscriber the graph shows is matched and acknowledged the last
+        state (reliable QoS), within ``timeout`` s."""
+        from rclpy.duration import Duration
+        end = time.monotonic() + timeout
+        while self.pub.get_subscription_count() < self.node.count_subscribers(PLANT_STATE_TOPIC):
+            if time.monotonic() > end:
+                return False
+            time.sleep(0.01)
+        left = max(0.0, end - time.monotonic())
+        return self.pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
 
 
 def channel_ok(node, msg, counters) -> bool:

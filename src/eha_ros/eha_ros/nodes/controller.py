@@ -3,9 +3,15 @@ position controller (core.controller.PositionController), follows eha/reference,
 integrator through channel switches (eha/redundancy), and goes to zero speed when estimates
 stop or go stale for more than watchdog_ticks, or in the safe state (core.safe_state: the
 estimate reports a position fault or the switch manager is FAILED_SAFE); it recovers from
-both without a jump. While the plant side says on eha/plant_state that it does not apply
-commands (a disarmed bridge) the controller is inactive: zero output, no integration; it
-starts from the piston position when the plant side becomes active."""
+both without a jump.
+
+A managed (lifecycle) node (lifecycle_msgs services ~/change_state, ~/get_state, ...;
+control.autostart: the state it reaches by itself): it answers every estimate in every state,
+so a lock-step plant never waits for it, but it controls only while it is ACTIVE and the plant
+side says on eha/plant_state that it applies commands (ACTIVE). Otherwise it is inactive: zero
+output, no integration; it starts bumplessly from the piston position when both are active.
+configure: nothing to connect (parameters are validated at start-up); activate: controls from
+the next fresh estimate; deactivate / cleanup / error: zero output."""
 from __future__ import annotations
 
 import sys
@@ -18,6 +24,7 @@ from ..core.controller.params import SCHEMA
 from ..core.controller.position import PositionController
 from ..core.stats import Counters, LoopStats
 from . import diag
+from .managed import autostart, state_label, transition
 from .common import (PLANT_STATE_TOPIC, clock_s, declare_and_validate, latched_qos, node_base,
                      run, stream_qos)
 
@@ -41,13 +48,15 @@ def make_node(params: dict):
     from ..core.estimator.adapt import VERDICTS
     from ..core.redundancy.state_machine import FAILED_SAFE
     Node = node_base()
+    from rclpy.lifecycle import LifecycleNodeMixin, TransitionCallbackReturn as Ret
     from eha_msgs.msg import (ActuatorCommand, PositionEstimate, PositionReference,
                               RedundancyStatus)
     from lifecycle_msgs.msg import State
 
-    class Controller(Node):
+    class Controller(LifecycleNodeMixin, Node):
         def __init__(self):
-            super().__init__('controller')
+            Node.__init__(self, 'controller')
+            LifecycleNodeMixin.__init__(self)
             self.p = p = declare_and_validate(self, SCHEMA, params)
             self.Ts = p['plant.sim.Ts']
             self.c = Counters()
@@ -69,6 +78,7 @@ def make_node(params: dict):
             self.active_channel = None
             self.plant_state = None             # eha/plant_state label; None: not heard (active)
             self.idle = False                   # inactive: the next fresh estimate restarts
+            self.enabled = False                # own lifecycle state ACTIVE
             self.pending = deque(maxlen=2000)   # tick-locked references waiting for their tick
             self.ref_seq = 0                    # newest tick-locked reference seen
             self.held = deque()                 # lock-step: estimates waiting for their reference
@@ -78,11 +88,13 @@ def make_node(params: dict):
             qos = stream_qos()
             self.pub = self.create_publisher(ActuatorCommand, 'eha/command', qos)
             self.pub_diag = diag.publisher(self)
+            # eha/plant_state first: the executor takes ready subscriptions in this order, so
+            # an ACTIVE that arrived (acknowledged) before a state is seen before its estimate
+            self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
+                                     latched_qos())
             self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
             self.create_subscription(PositionReference, 'eha/reference', self.on_reference, qos)
             self.create_subscription(RedundancyStatus, 'eha/redundancy', self.on_redundancy,
-                                     latched_qos())
-            self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
                                      latched_qos())
             # checking at half the watchdog time keeps the reaction within watchdog_ticks
             # without a second 1 kHz callback in the executor
@@ -95,7 +107,52 @@ def make_node(params: dict):
             self.get_logger().info(
                 f'controller: QFT G (order {len(p["position_controller.den"]) - 1}) and F at '
                 f'{1 / self.Ts:.0f} Hz, Tustin{" prewarped" if p["control.prewarp_hz"] else ""}, '
-                f'speed clamp {p["plant.drive.omega_max"]:.0f} rad/s')
+                f'speed clamp {p["plant.drive.omega_max"]:.0f} rad/s; autostart '
+                f'{p["control.autostart"]}')
+            autostart(self, p['control.autostart'])
+
+        # ---- lifecycle ----
+        @transition
+        def on_configure(self, state):
+            self.get_logger().info('configured: inactive (zero output) until activated')
+            return Ret.SUCCESS
+
+        @transition
+        def on_activate(self, state):
+            self.enabled, self.idle = True, True
+            self.last_good = None          # the watchdog starts with the next fresh estimate
+            self.get_logger().info(
+                'active: control starts from the piston position' +
+                ('' if not self.inactive else
+                 f' once the plant side is active (it is {self.plant_state})'))
+            return Ret.SUCCESS
+
+        @transition
+        def on_deactivate(self, state):
+            self.rest('inactive')
+            return Ret.SUCCESS
+
+        @transition
+        def on_cleanup(self, state):
+            self.rest('unconfigured')
+            return Ret.SUCCESS
+
+        @transition
+        def on_shutdown(self, state):
+            self.enabled = False
+            return Ret.SUCCESS
+
+        @transition
+        def on_error(self, state):
+            self.rest(f'lifecycle error in {state.label}: unconfigured')
+            return Ret.SUCCESS
+
+        def rest(self, why: str):
+            """Zero output, no integration; the next activation restarts bumplessly."""
+            if self.enabled and not self.inactive:
+                self.c.bump('inactive_periods')
+            self.enabled, self.idle = False, True
+            self.get_logger().info(f'{why}: zero output, no integration')
 
         def on_reference(self, msg):
             """seq 0: apply now. seq k > 0: a tick-locked source (the sweep) -> apply when the
@@ -135,17 +192,22 @@ def make_node(params: dict):
                 return
             self.plant_state = label
             if label == 'active':
+                self.last_good = None      # the watchdog starts with the next fresh estimate
                 self.get_logger().info('plant side active: control starts from the piston '
-                                       'position')
+                                       'position' if self.enabled else
+                                       'plant side active; the controller is not (lifecycle '
+                                       f'{state_label(self)}): zero output')
             else:
                 self.idle = True
-                self.c.bump('inactive_periods')
+                if self.enabled:
+                    self.c.bump('inactive_periods')
                 self.get_logger().info(f'plant side {label}: controller inactive (zero output, '
                                        f'no integration) until it is active')
 
         @property
         def inactive(self) -> bool:
-            return self.plant_state not in (None, 'active')
+            """Zero output, no integration: not ACTIVE itself, or the plant side is not."""
+            return not self.enabled or self.plant_state not in (None, 'active')
 
         def on_estimate(self, msg):
             """Lock-step with a tick-locked reference source (the sweep): estimate(k) waits for
@@ -224,8 +286,10 @@ def make_node(params: dict):
             self.last_speed = speed
 
         def watchdog(self):
-            """No fresh estimate for watchdog_ticks: command zero speed (repeated), report."""
-            if self.last_good is None:
+            """No fresh estimate for watchdog_ticks while controlling: command zero speed
+            (repeated), report. Inactive, the output is zero already (and a stack being brought
+            up pauses its loop for the transitions)."""
+            if self.last_good is None or (self.inactive and not self.tripped):
                 return
             if clock_s(self) - self.last_good > self.watchdog_s:
                 if not self.tripped:
@@ -242,7 +306,7 @@ def make_node(params: dict):
             values.update(watchdog_tripped=self.tripped, drive_gain_mismatch=self.mismatch,
                           safe_state=self.safe or '',
                           plant_state=self.plant_state or 'not heard (taken as active)',
-                          active=not self.inactive)
+                          lifecycle=state_label(self), active=not self.inactive)
             values.update(self.c)
             if self.safe is not None:
                 diag.publish(self, self.pub_diag, 'loop', values, diag.ERROR,
@@ -253,7 +317,11 @@ def make_node(params: dict):
             diag.publish(self, self.pub_diag, 'loop', values, diag.WARN if warn else diag.OK,
                          'watchdog tripped' if self.tripped else
                          ('inputs rejected or drive mismatch' if warn else
-                          f'inactive: plant side {self.plant_state}' if self.inactive else 'ok'))
+                          self.inactive_text() if self.inactive else 'ok'))
+
+        def inactive_text(self) -> str:
+            return (f'inactive: lifecycle {state_label(self)}' if not self.enabled else
+                    f'inactive: plant side {self.plant_state}')
 
     return Controller()
 

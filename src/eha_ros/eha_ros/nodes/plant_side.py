@@ -22,7 +22,6 @@ controller rests while it is not ACTIVE. <prefix>.autostart: the state reached a
 """
 from __future__ import annotations
 
-import functools
 import sys
 import threading
 import time
@@ -38,6 +37,7 @@ from . import diag
 from .common import (PlantState, StartGate, channel_ok, declare_and_validate, latched_qos,
                      node_base, publish_counted, stream_qos)
 from .compose import unlocked
+from .managed import state_label, transition
 
 MAX_CATCH_UP = 20              # periods: further behind, the loop resynchronises
 SUPERVISE_PERIOD = 0.02        # s: pending lifecycle transitions are carried out this often
@@ -61,21 +61,6 @@ def state_publishers(node, topic: str) -> list[str]:
     """Fully qualified names of the nodes publishing ``topic`` (this node's own included)."""
     return [f'{info.node_namespace.rstrip("/")}/{info.node_name}'
             for info in node.get_publishers_info_by_topic(topic)]
-
-
-def transition(method):
-    """A lifecycle callback: an exception is logged and counted, and answers ERROR (rclpy would
-    turn it into ERROR silently)."""
-    @functools.wraps(method)
-    def wrapped(self, state):
-        from rclpy.lifecycle import TransitionCallbackReturn
-        try:
-            return method(self, state)
-        except Exception as err:
-            self.c.bump('lifecycle_errors')
-            self.get_logger().error(f'{method.__name__} failed: {err!r}')
-            return TransitionCallbackReturn.ERROR
-    return wrapped
 
 
 def make_node(params: dict, program: Program):
@@ -159,7 +144,7 @@ def make_node(params: dict, program: Program):
 
         # ---- lifecycle ----
         def state_label(self) -> str:
-            return self._state_machine.current_state[1]
+            return state_label(self)
 
         def configure_now(self):
             """Autostart: configure; a device not reachable yet is retried every retry_period
@@ -439,8 +424,19 @@ def make_node(params: dict, program: Program):
                     time.sleep(0.01)
 
         def lockstep_loop(self):
-            """Step on command(k); re-publish state(k) when it does not come. State(k) goes out
-            first (after an autostart activation: a controller sees ACTIVE before it)."""
+            """Step on command(k); re-publish state(k) when it does not come. With
+            lockstep_from_activation, state(0) waits for the first activation and for every
+            eha/plant_state subscriber to have ACTIVE (acknowledged), so a lock-step run is the
+            same from tick 0 whoever activates it and whenever: the controller has seen ACTIVE
+            before estimate(0)."""
+            if self.p[self.q + 'lockstep_from_activation']:
+                if not self.plant_state.active:
+                    self.get_logger().info('lock-step: state(0) waits for the activation')
+                while self.running and not self.plant_state.active:
+                    time.sleep(0.01)
+                if not self.plant_state.acked(self.p[self.q + 'lockstep_timeout']):
+                    self.get_logger().warning('lock-step: not every eha/plant_state subscriber '
+                                              'acknowledged ACTIVE; stepping anyway')
             self.publish_state()
             while self.running:
                 if not self.hw.link_up:

@@ -9,7 +9,8 @@ eha/sim/truth).
 On each eha/state(k) it publishes the reference of tick k + lead_ticks stamped with that seq;
 the controller applies it when it handles tick k + lead_ticks, so the reference timing is exact
 in real time and lock-step alike. Ctrl-C mid-sweep keeps every finished frequency and marks
-the summary incomplete.
+the summary incomplete. It starts once a controller answers and the plant side applies
+commands (eha/plant_state ACTIVE; not heard: taken as active) for sweep.start_delay.
 """
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ from ..core.sweep.params import SCHEMA, build_plan
 from ..core.stats import LoopStats
 from ..core.sweep.session import from_params, print_table
 from . import diag
-from .common import declare_and_validate, node_base, run, stream_qos
+from .common import (PLANT_STATE_TOPIC, declare_and_validate, latched_qos, node_base, run,
+                     stream_qos)
 
 MARGIN_TICKS = 30           # data of a tick is complete this many ticks after its state
 
@@ -47,6 +49,7 @@ def make_node(params: dict):
     Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, ActuatorState, ExternalLoad, PlantTruth,
                               PositionEstimate, PositionReference)
+    from lifecycle_msgs.msg import State
 
     plan = build_plan(params)          # one-line error for a bad sweep, before ROS starts
 
@@ -71,11 +74,14 @@ def make_node(params: dict):
             self.loop = LoopStats(plan.Ts)
             self.ready_since = None
             self.commands_seen = 0
+            self.plant_active = True           # eha/plant_state; not heard: taken as active
             self.done = False
             self.exit_code = 0
             qos = stream_qos()
             self.pub = self.create_publisher(PositionReference, 'eha/reference', qos)
             self.pub_diag = diag.publisher(self)
+            self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
+                                     latched_qos())
             self.create_subscription(ActuatorState, 'eha/state', self.on_state, qos)
             self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
             self.create_subscription(PlantTruth, 'eha/sim/truth', self.on_truth, qos)
@@ -84,6 +90,9 @@ def make_node(params: dict):
             self.get_logger().info(
                 f'sweep: {p["sweep.mode"]}, {plan.n_ticks * plan.Ts:.1f} s planned, writing '
                 f'{self.out}/')
+
+        def on_plant_state(self, msg):
+            self.plant_active = msg.id == State.PRIMARY_STATE_ACTIVE
 
         def on_command(self, msg):
             self.commands_seen += 1
@@ -107,8 +116,9 @@ def make_node(params: dict):
             s = self.session
             k = msg.seq
             if s.seq0 is None:
-                if self.commands_seen == 0:
-                    return                         # wait for a controller to answer
+                if self.commands_seen == 0 or not self.plant_active:
+                    self.ready_since = None
+                    return                         # wait for an active loop
                 now = time.monotonic()
                 self.ready_since = self.ready_since or now
                 if now - self.ready_since < self.p['sweep.start_delay']:

@@ -7,6 +7,14 @@ process. --structure processes runs each loop node as its own process as well. L
 every node its own process, the plant steps when command(k) has arrived.
 One folder per run: out/stack/<run>/ with logs/<process>.log and stack.json (commands, exit
 codes, CPU per process, the nodes' last /diagnostics).
+Lifecycle: run_stack is the lifecycle manager (eha_ros.lifecycle_manager). The managed nodes
+(the plant side and the controller) start unconfigured; run_stack configures them, activates
+the controller and then activates a simulated plant side (sim, mock). A real drive
+(--plant bridge, with or without the ADS test peer) is left inactive, configured and
+disarmed, until the operator activates it (/hardware_bridge/change_state activate or
+/eha/bridge/arm) or --activate says so. Every state change is printed and on /diagnostics
+('run_stack: lifecycle'); a transition that cannot be carried out fails the run with its
+reason.
 One stack per ROS domain: run_stack refuses to start (exit 2) while another plant publishes
 /eha/state on its domain; --domain-id N runs a second stack beside it. Ctrl-C, SIGTERM and
 SIGHUP stop the run cleanly (stack.json and recording written); the nodes die with run_stack
@@ -33,6 +41,8 @@ STOP_ON_ERROR = {'switch_manager: supervisor': 'loop supervisor', 'recorder: mca
 # which may run slower than the wall clock on a loaded machine)
 SILENT_AFTER = {'realtime': 5.0, 'lockstep': 20.0}
 PLANT_NODE = {'sim': 'plant_sim', 'bridge': 'hardware_bridge', 'mock': 'hardware_bridge'}
+AUTOSTART_KEY = {'plant_sim': 'sim_node.autostart', 'hardware_bridge': 'bridge.autostart',
+                 'controller': 'control.autostart'}
 
 
 def parse(argv):
@@ -44,16 +54,18 @@ def parse(argv):
                     help='realtime (default): wall clock at 1 kHz; lockstep: the plant waits for '
                          'each command, nodes follow /clock (deterministic)')
     ap.add_argument('--plant', choices=sorted(PLANT_NODE), default='sim',
-                    help='sim (default): plant_sim; bridge: hardware_bridge to the drive; mock: '
-                         'hardware_bridge on its mock backend (commands echoed into states, no '
-                         'physics, no PLC; activated at start)')
+                    help='sim (default): plant_sim; bridge: hardware_bridge to the drive (left '
+                         'inactive until activated); mock: hardware_bridge on its mock backend '
+                         '(commands echoed into states, no physics, no PLC; activated at start)')
     ap.add_argument('--structure', choices=('auto', 'composed', 'processes'), default='auto',
                     help='auto (default): composed in real time, processes in lock-step')
     ap.add_argument('--duration', type=float, default=None,
                     help='stop after this many seconds of running loop, counted from the '
                          'first plant tick (default: run until Ctrl-C)')
     ap.add_argument('--start-timeout', type=float, default=120.0,
-                    help='give up when the loop has not started after this many seconds')
+                    help='give up when the loop has not started after this many seconds '
+                         '(the lifecycle bring-up included: a refused plant-side transition is '
+                         'retried every second until then)')
     ap.add_argument('--sweep', action='store_true',
                     help='also run the sweep node (config/sweep.yaml); stop when it finishes')
     ap.add_argument('--record', action='store_true',
@@ -66,13 +78,11 @@ def parse(argv):
                     help='port of --live (default 8765, from config/live.yaml); implies --live')
     ap.add_argument('--no-peer', action='store_true',
                     help='--plant bridge: do not start the ADS test peer (a real PLC answers at '
-                         'ads.host/ads.tcp_port); activation is then explicit (lifecycle '
-                         'change_state, /eha/bridge/arm, or --activate)')
+                         'ads.host/ads.tcp_port)')
     ap.add_argument('--activate', action='store_true',
-                    help='--plant bridge --no-peer: activate (arm) the real drive by itself as '
-                         'soon as the arming conditions hold (explicit operator choice; default: '
-                         'it stays inactive until /hardware_bridge/change_state activate or '
-                         '/eha/bridge/arm)')
+                    help='--plant bridge: activate (arm) the drive as soon as the arming '
+                         'conditions hold (explicit operator choice; default: it stays inactive '
+                         'until /hardware_bridge/change_state activate or /eha/bridge/arm)')
     ap.add_argument('--no-switch-manager', action='store_true',
                     help='leave the switch manager out (channel A drives throughout)')
     ap.add_argument('-p', dest='params', action='append', default=[], metavar='NODE:KEY:=VALUE',
@@ -126,18 +136,27 @@ def plan(args) -> dict:
     peer = args.plant == 'bridge' and not args.no_peer
     if args.plant == 'mock':
         extra.setdefault(plant, [])[:0] = ['-p', 'hardware_bridge:bridge.backend:=mock']
-    if args.activate and not (args.plant == 'bridge' and args.no_peer):
-        raise UsageError('--activate only applies to --plant bridge --no-peer (a simulated '
-                         'plant side is activated at start)')
-    if peer or args.plant == 'mock' or args.activate:   # activate once the conditions hold
-        extra.setdefault(plant, [])[:0] = ['-p', 'hardware_bridge:bridge.autostart:=active']
-    return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant}
+    if args.activate and args.plant != 'bridge':
+        raise UsageError('--activate only applies to --plant bridge (a simulated plant side is '
+                         'activated at start)')
+    activate = args.plant != 'bridge' or args.activate
+    if args.mode == 'lockstep' and not activate:    # an inactive drive's states all the same
+        extra.setdefault(plant, []).extend(
+            ['-p', f'{plant}:bridge.lockstep_from_activation:=false'])
+    return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant,
+            'managed': [plant, 'controller'], 'activate': activate}
 
 
-def build_stack(args, p: dict, out: str | None = None):
-    """The Stack run_stack starts (and the launch file mirrors) for parsed options."""
+def build_stack(args, p: dict, out: str | None = None, managed: bool = False):
+    """The Stack run_stack starts (and the launch file mirrors) for parsed options.
+    ``managed``: the managed nodes start unconfigured (run_stack brings them up); otherwise
+    they reach their state by themselves (autostart), as the plan says."""
     from ..stack import Stack
     extra = {k: list(v) for k, v in p['extra'].items()}
+    for node in p['managed']:
+        state = 'unconfigured' if managed else \
+            'active' if node == 'controller' or p['activate'] else 'inactive'
+        extra.setdefault(node, [])[:0] = ['-p', f'{node}:{AUTOSTART_KEY[node]}:={state}']
     if args.sweep and out:
         extra.setdefault('sweep', []).extend(
             ['-p', f'sweep:sweep.out_dir:={out}', '-p', 'sweep:sweep.run_name:=sweep'])
@@ -186,6 +205,23 @@ def wait_for_loop(stack, monitor, plant: str, timeout: float) -> str:
     return 'duration'
 
 
+def bring_up(manager, stack, p: dict, deadline: float) -> str:
+    """The managed nodes up: '' when done, else the run's stop reason."""
+    plant = p['plant']
+    steps = [(plant, 'configure', True), ('controller', 'configure', False),
+             ('controller', 'activate', False)]
+    if p['activate']:
+        steps.append((plant, 'activate', True))
+    why = manager.bring_up(steps, deadline, stack.dead)
+    if why:
+        return why if why.startswith('node exited') else f'lifecycle: {why}'
+    if not p['activate']:
+        print(f'run_stack: lifecycle: {plant} left inactive (a real drive: configured, '
+              f'disarmed); activate it with /{plant}/change_state activate or /eha/bridge/arm',
+              flush=True)
+    return ''
+
+
 def loop_status(monitor, plant: str) -> dict:
     return monitor.find(f'{plant}: ')
 
@@ -223,11 +259,12 @@ def main(argv=None) -> int:
 
 def run(args, signals=()) -> int:
     """``signals``: where interrupt_on_signals puts the signal that stopped the run."""
+    from ..lifecycle_manager import LifecycleManager
     from ..monitor import CpuMeter, DiagMonitor, refuse_second_stack
     p = plan(args)
     if args.domain_id is not None:      # the monitor (rclpy.init) and every node read it
         os.environ['ROS_DOMAIN_ID'] = str(args.domain_id)
-    monitor = DiagMonitor()
+    monitor = DiagMonitor('run_stack')
     try:
         refuse_second_stack(monitor, 'scripts/run_stack --domain-id N')
         out = run_dir(args.out, args.name)
@@ -240,7 +277,8 @@ def run(args, signals=()) -> int:
         monitor.close()
         raise
     logs = os.path.join(out, 'logs')
-    stack = build_stack(args, p, out)
+    stack = build_stack(args, p, out, managed=True)
+    manager = LifecycleManager(monitor, p['managed'], say=lambda text: print(text, flush=True))
     stack.start()
     print(f'run_stack: {args.mode}, {p["structure"]}: started '
           f'{", ".join(stack.procs)} (logs in {logs}/)', flush=True)
@@ -252,7 +290,9 @@ def run(args, signals=()) -> int:
     t_start = time.monotonic()
     reason = 'duration'
     try:
-        reason = wait_for_loop(stack, monitor, p['plant'], args.start_timeout)
+        reason = bring_up(manager, stack, p, t_start + args.start_timeout)
+        if not reason:
+            reason = wait_for_loop(stack, monitor, p['plant'], args.start_timeout)
         if reason == 'duration':
             _refuse_late(stack, monitor, out)
             print(f'run_stack: loop running after {time.monotonic() - t_start:.1f} s',

@@ -3,6 +3,7 @@ loop settings (config/controller_node.yaml) and the shared plant.* set (config/p
 from __future__ import annotations
 
 from ..params import Param, ParamError, Schema
+from ..hardware.params import AUTOSTART
 from ..plant.parameters import PLANT_SCHEMA
 
 TF = [Param(f'{name}.{part}', 'float[]', unit, doc=doc)
@@ -33,6 +34,10 @@ NODE = Schema('controller', TF + [
           doc='state of G frozen this long after the active channel changes'),
     Param('control.drive_check_tolerance', 'float', '', 0.01, 0.0, 1.0,
           doc='relative mismatch between velocity_controller and plant.drive gains to report'),
+    Param('control.autostart', 'str', '', 'active', choices=AUTOSTART,
+          doc='lifecycle state to reach by itself at start-up: unconfigured (wait for a '
+              'manager, e.g. run_stack), inactive (zero output) or active (controls while the '
+              'plant side is active)'),
     Param('control.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
 ])
 

@@ -20,6 +20,9 @@ def loop_params(prefix: str, *, command_timeout: float, autostart: str,
     return exclusive + [
         Param(f'{prefix}.lockstep', 'bool', '', False,
               doc='step only when the command of the previous state arrived; publish /clock'),
+        Param(f'{prefix}.lockstep_from_activation', 'bool', '', True,
+              doc='lock-step: state(0) waits for the first activation, so a run is the same '
+                  'from tick 0 (false: steps from configure, commands applied once activated)'),
         Param(f'{prefix}.lockstep_timeout', 'float', 's', 1.0, 1e-3, 60.0,
               doc='lock-step: re-publish state(k) after this wall time without command(k)'),
         Param(f'{prefix}.start_after', 'str[]', '', [''], min_len=1,

@@ -20,12 +20,15 @@ class SimHardware(Hardware):
         self.c = counters
         self.seed, self.initial_position, self.max_load = seed, initial_position, max_load
         self.plant = None
+        self.selection = None        # the latest eha/channel_select, also from before configure
         self.load = 0.0
         self.r = Reading()
 
     def configure(self) -> str:
         self.plant = EhaPlant(self.p, seed=self.seed)
         self.plant.reset(position=self.initial_position)
+        if self.selection is not None:
+            self.plant.select(*self.selection)
         return (f'A_p={self.p["plant.cylinder.A_p"]:.4g} m^2, '
                 f'D_p={self.p["plant.pump.D_p"]:.4g} m^3/rad, '
                 f'substeps={self.p["plant.sim.substeps"]}')
@@ -65,7 +68,9 @@ class SimHardware(Hardware):
         return self._truth
 
     def select(self, channel, drive_enable, valve_open, bypass_open) -> None:
-        self.plant.select(channel, tuple(drive_enable), tuple(valve_open), bypass_open)
+        self.selection = (channel, tuple(drive_enable), tuple(valve_open), bypass_open)
+        if self.plant is not None:
+            self.plant.select(*self.selection)
 
     def inject_fault(self, name: str, channel: int, magnitude: float, duration: float):
         return self.plant.inject_fault(name, channel, magnitude, duration)
