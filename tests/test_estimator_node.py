@@ -65,8 +65,8 @@ def stack():
     plant = start_process(cmd('plant_sim', SIM))
     procs = {'estimator': est, 'plant_sim': plant}
     yield procs
-    for name, p in procs.items():
-        code, out, err = stop_process(p)
+    errs = {name: stop_process(p)[2] for name, p in procs.items()}     # all stopped, then
+    for name, err in errs.items():                                     # checked
         assert 'Traceback' not in err, f'{name}: {err}'
 
 
