@@ -18,6 +18,8 @@ import time
 
 RETRY_PERIOD = 1.0          # [s] between attempts of a refused plant-side transition
 CALL_TIMEOUT = 10.0         # [s] for one ChangeState / GetState answer
+GOAL = {'configure': 'inactive', 'activate': 'active', 'deactivate': 'inactive',
+        'cleanup': 'unconfigured', 'shutdown': 'finalized'}
 VERB = {'configuring': 'configure', 'activating': 'activate', 'deactivating': 'deactivate',
         'cleaningup': 'cleanup', 'shuttingdown': 'shutdown', 'errorprocessing': 'error'}
 
@@ -144,4 +146,8 @@ class LifecycleManager:
             with self.lock:
                 self.failure = why
             self.publish()
-        return why
+            return why
+        end = time.monotonic() + 1.0             # their transition_events printed first
+        while time.monotonic() < end and any(self.states[n] != GOAL[t] for n, t, _ in steps):
+            time.sleep(0.01)
+        return ''
