@@ -121,27 +121,12 @@ class LifecycleManager:
 
     def bring_up(self, steps, deadline: float, dead=lambda: {}) -> str:
         """Carry out ``steps`` [(node, transition, retry)] in order; '' when all succeeded,
-        else the reason (reported ERROR on /diagnostics). ``retry``: a refusal is retried every
-        RETRY_PERIOD until ``deadline`` (its reason printed once, again when it changes)."""
+        else the reason (reported ERROR on /diagnostics)."""
         why = self.wait_for_services(deadline, dead)
-        for name, transition, retry in steps if not why else ():
-            said = ''
-            while True:
-                ok, reason = self.change(name, transition)
-                if ok:
-                    break
-                gone = dead()
-                if not retry or time.monotonic() + RETRY_PERIOD > deadline or gone:
-                    why = f'{name} {transition} refused: {reason}' + (
-                        '; node exited: ' + ', '.join(gone) if gone else '')
-                    break
-                if reason != said:
-                    self.say(f'run_stack: lifecycle: {name} {transition} refused: {reason}; '
-                             f'retried every {RETRY_PERIOD:g} s')
-                    said = reason
-                time.sleep(RETRY_PERIOD)
+        for name, transition, retry in steps:
             if why:
                 break
+            why = self.carry_out(name, transition, retry, deadline, dead)
         if why:
             with self.lock:
                 self.failure = why
@@ -151,3 +136,21 @@ class LifecycleManager:
         while time.monotonic() < end and any(self.states[n] != GOAL[t] for n, t, _ in steps):
             time.sleep(0.01)
         return ''
+
+    def carry_out(self, name: str, transition: str, retry: bool, deadline: float, dead) -> str:
+        """One transition; '' when done, else why not. ``retry``: a refusal is retried every
+        RETRY_PERIOD until ``deadline`` (its reason printed once, again when it changes)."""
+        said = ''
+        while True:
+            ok, reason = self.change(name, transition)
+            if ok:
+                return ''
+            gone = dead()
+            if not retry or time.monotonic() + RETRY_PERIOD > deadline or gone:
+                return f'{name} {transition} refused: {reason}' + (
+                    '; node exited: ' + ', '.join(gone) if gone else '')
+            if reason != said:
+                self.say(f'run_stack: lifecycle: {name} {transition} refused: {reason}; '
+                         f'retried every {RETRY_PERIOD:g} s')
+                said = reason
+            time.sleep(RETRY_PERIOD)

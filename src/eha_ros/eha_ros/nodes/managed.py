@@ -1,11 +1,9 @@
-"""What the managed (lifecycle) nodes share: the states a node can reach by itself at start-up
-and the wrapper of their transition callbacks (rclpy.lifecycle, lifecycle_msgs services
-~/change_state, ~/get_state, ~/get_available_transitions, ...)."""
+"""What the managed (lifecycle) nodes share: reaching a start-up state by itself
+(core.hardware.params.AUTOSTART), the state's label and the wrapper of their transition
+callbacks (rclpy.lifecycle, lifecycle_msgs services ~/change_state, ~/get_state, ...)."""
 from __future__ import annotations
 
 import functools
-
-from ..core.hardware.params import AUTOSTART     # noqa: F401  (unconfigured, inactive, active)
 
 
 def transition(method):
@@ -29,7 +27,7 @@ def state_label(node) -> str:
 
 
 def autostart(node, target: str) -> None:
-    """Reach ``target`` (AUTOSTART) by itself, as a manager would by change_state."""
+    """Reach ``target`` (unconfigured, inactive, active) by itself, as a manager would by change_state."""
     if target in ('inactive', 'active'):
         node.trigger_configure()
     if target == 'active' and state_label(node) == 'inactive':
