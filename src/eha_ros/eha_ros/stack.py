@@ -14,11 +14,11 @@ import sys
 import time
 
 from .core.batch import NODE_FILES
+from .core.hardware.params import LOOP_PREFIX
 from .core.params import default_config_dir
 
 # plant-side nodes and the prefix of their loop parameters (core.hardware.params.loop_params):
 # their own lock-step switch (they publish /clock; the others use sim time) and start gate
-LOCKSTEP_PREFIX = {'plant_sim': 'sim_node', 'hardware_bridge': 'bridge'}
 
 
 def proc_stat(pid: int) -> list[str]:
@@ -120,7 +120,7 @@ class Stack:
         self.config_dir = config_dir
         self.extra = {k: list(v) for k, v in (extra or {}).items()}
         for name in self.nodes:
-            pre = LOCKSTEP_PREFIX.get(name)
+            pre = LOOP_PREFIX.get(name)
             args = self.extra.setdefault(name, [])
             if lockstep:       # the plant steps per command and publishes /clock; others follow it
                 args += ['-p', f'{name}:{pre}.lockstep:=true'] if pre else \

@@ -13,6 +13,7 @@ from __future__ import annotations
 import sys
 
 from ..core.bridge.params import SCHEMA
+from ..core.hardware.params import LOOP_PREFIX
 from .common import run
 from .plant_side import Program, make_node as make_plant_side
 
@@ -25,7 +26,7 @@ def hardware(p: dict, counters):
     return AdsHardware(p, counters, p['bridge.stale_limit'])
 
 
-PROGRAM = Program('hardware_bridge', SCHEMA, 'bridge', hardware, bridge_services=True,
+PROGRAM = Program('hardware_bridge', SCHEMA, LOOP_PREFIX['hardware_bridge'], hardware, bridge_services=True,
                   exclusive=True)
 
 

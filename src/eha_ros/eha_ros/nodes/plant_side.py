@@ -140,12 +140,9 @@ def make_node(params: dict, program: Program):
             self.get_logger().info(
                 f'{program.name}: {self.hw.kind} backend, '
                 f'{"lock-step" if self.lockstep else "real time"} at {1.0 / self.Ts:.0f} Hz; '
-                f'{self.state_label()} (autostart {p[q + "autostart"]})')
+                f'{state_label(self)} (autostart {p[q + "autostart"]})')
 
         # ---- lifecycle ----
-        def state_label(self) -> str:
-            return state_label(self)
-
         def configure_now(self):
             """Autostart: configure; a device not reachable yet is retried every retry_period
             (its reason logged once, again only when it changes)."""
@@ -159,7 +156,7 @@ def make_node(params: dict, program: Program):
                 self.retrying = False
             if self.fatal:
                 raise UsageError(self.fatal)      # start-up: one line, exit 2
-            if self.state_label() == 'inactive':
+            if state_label(self) == 'inactive':
                 self.want_configured = False
                 self.activate_when_allowed()      # autostart active: before the first tick
             elif first_failure:
@@ -262,7 +259,7 @@ def make_node(params: dict, program: Program):
         @unlocked
         def supervise(self):
             """Carries out what the loop or autostart asked for (executor thread)."""
-            label = self.state_label()
+            label = state_label(self)
             if label == 'active' and not self.gate.armed:
                 self.trigger_deactivate()         # the gate disarmed itself: link, conflict
             elif self.want_configured and label == 'unconfigured' and \
@@ -299,7 +296,7 @@ def make_node(params: dict, program: Program):
             self.c.bump('channel_selects')
 
         def on_fault(self, req, resp):
-            if self.state_label() == 'unconfigured':
+            if state_label(self) == 'unconfigured':
                 resp.success, resp.message = False, 'not configured'
                 return resp
             with self.hw_lock:
@@ -312,7 +309,7 @@ def make_node(params: dict, program: Program):
 
         def on_arm(self, req, resp):
             """eha/bridge/arm: an alias of the activate/deactivate transitions."""
-            label = self.state_label()
+            label = state_label(self)
             if req.data:
                 if label == 'active':
                     ok, text = True, 'already armed'
@@ -320,7 +317,7 @@ def make_node(params: dict, program: Program):
                     ok, text = False, f'arming refused: {label} (configure first)'
                 else:
                     self.trigger_activate()
-                    ok = self.state_label() == 'active'
+                    ok = state_label(self) == 'active'
                     text = 'armed' if ok else self.transition_note
             elif label == 'active':
                 self.trigger_deactivate()
@@ -582,7 +579,7 @@ def make_node(params: dict, program: Program):
             now = self.now()
             g = self.gate
             per, ex = self.period.summary(), self.exec_time.summary()
-            label = self.state_label()
+            label = state_label(self)
             values = {'state': label, 'active': g.armed, 'backend': self.hw.kind,
                       'ticks': self.k, 'sim_time_s': self.k * self.Ts,
                       'period_mean_s': per['mean'], 'period_p99_s': per['p99'],

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 
+from ..core.hardware.params import LOOP_PREFIX
 from ..core.hardware.sim import SimHardware
 from ..core.plant_sim_params import SCHEMA
 from .common import run
@@ -21,7 +22,7 @@ def hardware(p: dict, counters):
                        max_load=p['sim_node.max_abs_load'])
 
 
-PROGRAM = Program('plant_sim', SCHEMA, 'sim_node', hardware)
+PROGRAM = Program('plant_sim', SCHEMA, LOOP_PREFIX['plant_sim'], hardware)
 
 
 def make_node(params: dict):

@@ -29,6 +29,7 @@ import sys
 import time
 
 from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
+from ..core.hardware.params import LOOP_PREFIX
 from ..core.params import default_config_dir
 from ..core.report import reserve_json, run_dir, write_json
 
@@ -41,8 +42,8 @@ STOP_ON_ERROR = {'switch_manager: supervisor': 'loop supervisor', 'recorder: mca
 # which may run slower than the wall clock on a loaded machine)
 SILENT_AFTER = {'realtime': 5.0, 'lockstep': 20.0}
 PLANT_NODE = {'sim': 'plant_sim', 'bridge': 'hardware_bridge', 'mock': 'hardware_bridge'}
-AUTOSTART_KEY = {'plant_sim': 'sim_node.autostart', 'hardware_bridge': 'bridge.autostart',
-                 'controller': 'control.autostart'}
+AUTOSTART_KEY = dict({node: f'{pre}.autostart' for node, pre in LOOP_PREFIX.items()},
+                     controller='control.autostart')
 
 
 def parse(argv):
@@ -142,7 +143,7 @@ def plan(args) -> dict:
     activate = args.plant != 'bridge' or args.activate
     if args.mode == 'lockstep' and not activate:    # an inactive drive's states all the same
         extra.setdefault(plant, []).extend(
-            ['-p', f'{plant}:bridge.lockstep_from_activation:=false'])
+            ['-p', f'{plant}:{LOOP_PREFIX[plant]}.lockstep_from_activation:=false'])
     return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant,
             'managed': [plant, 'controller'], 'activate': activate}
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..params import Param, Schema
 from ..plant.parameters import PLANT_SCHEMA
-from ..hardware.params import loop_params
+from ..hardware.params import LOOP_PREFIX, loop_params
 
 NODE = Schema('hardware_bridge', [
     Param('ads.ams_net_id', 'str', '', '127.0.0.1.1.1',
@@ -23,7 +23,7 @@ NODE = Schema('hardware_bridge', [
           doc='symbol map YAML; a relative path is taken from the config folder'),
     Param('bridge.backend', 'str', '', 'ads', choices=('ads', 'mock'),
           doc='ads: the drive over ADS; mock: commands echoed into states (tests, no PLC)'),
-    *loop_params('bridge', command_timeout=0.02, autostart='inactive', startup_discovery=2.0,
+    *loop_params(LOOP_PREFIX['hardware_bridge'], command_timeout=0.02, autostart='inactive', startup_discovery=2.0,
                  max_speed_rate=5.0e5, arm_max_command=10.0),
     Param('bridge.stale_limit', 'float', 's', 0.01, 1e-3, 10.0,
           doc='PLC cycle counter standing still (or reads failing) this long: state invalid'),
