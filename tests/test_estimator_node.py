@@ -207,3 +207,32 @@ def test_stale_marked_when_plant_stops(stack, ros_node):
     assert all(e.seq > last_state for _, e in after)
     assert all(math.isfinite(e.position) for _, e in after)
     assert stack['estimator'].poll() is None
+
+
+def test_failed_publish_is_counted_not_a_crash(rclpy_session, params):
+    """rmw can refuse a publish ('cannot publish data') under DDS overload or at shutdown:
+    the node counts it, logs it and answers the next state (it used to exit with a Traceback
+    from inside its state callback)."""
+    from eha_msgs.msg import ActuatorState
+    from eha_ros.nodes import estimator
+
+    class RefusingPublisher:
+        calls = 0
+
+        def publish(self, msg):
+            RefusingPublisher.calls += 1
+            raise RuntimeError('Failed to publish: cannot publish data')
+
+    node = estimator.make_node(params)
+    try:
+        node.pub = node.pub_diag = RefusingPublisher()
+        for seq in (1, 2, 3):
+            m = ActuatorState(seq=seq, position=1e-3, motor_speed=[0.0, 0.0],
+                              pressure_a=1.0e6, pressure_b=1.0e6, active_channel=0, valid=True)
+            node.on_state(m)
+        node.publish_diagnostics()
+        assert RefusingPublisher.calls == 4
+        assert node.c['publish_errors'] == 4
+        assert node.c['estimates'] == 3 and node.last_seq == 3
+    finally:
+        node.destroy_node()

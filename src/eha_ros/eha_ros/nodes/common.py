@@ -224,11 +224,13 @@ def channel_ok(node, msg, counters) -> bool:
 
 def publish_counted(node, pub, msg, what: str) -> None:
     """Publish from a loop thread; a failure (e.g. RCLError under DDS overload) is counted as
-    publish_errors and logged, so the loop goes on."""
+    publish_errors (where the node keeps counters) and logged, so the loop goes on."""
     try:
         pub.publish(msg)
     except Exception as err:
-        node.c.bump('publish_errors')
+        counters = getattr(node, 'c', None)
+        if counters is not None:
+            counters.bump('publish_errors')
         node.get_logger().error(f'publishing {what} failed: {err}', throttle_duration_sec=1.0)
 
 

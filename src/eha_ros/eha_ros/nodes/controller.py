@@ -26,7 +26,7 @@ from ..core.stats import Counters, LoopStats
 from . import diag
 from .managed import autostart, state_label, transition
 from .common import (PLANT_STATE_TOPIC, clock_s, declare_and_validate, latched_qos, node_base,
-                     run, stream_qos)
+                     publish_counted, run, stream_qos)
 
 
 def drive_mismatch(p: dict) -> float:
@@ -282,7 +282,7 @@ def make_node(params: dict):
             c.seq = int(seq)
             c.motor_speed_ref = float(speed)
             c.saturated = bool(saturated)
-            self.pub.publish(c)
+            publish_counted(self, self.pub, c, f'command {seq}')
             self.last_speed = speed
 
         def watchdog(self):

@@ -1,6 +1,7 @@
 """/diagnostics publishing shared by the nodes."""
 from __future__ import annotations
 
+from .common import publish_counted
 from .compose import unlocked
 
 
@@ -24,7 +25,7 @@ def publish(node, pub, name: str, values: dict, level: int = 0, message: str = '
                               message=message, hardware_id='eha')
     status.values = [KeyValue(key=str(k), value=_fmt(v)) for k, v in values.items()]
     arr.status = [status]
-    pub.publish(arr)
+    publish_counted(node, pub, arr, '/diagnostics')
 
 
 def _fmt(v) -> str:

@@ -17,7 +17,8 @@ from ..core.estimator.fault_detector import NAMES
 from ..core.estimator.params import SCHEMA
 from ..core.stats import Counters, LoopStats
 from . import diag
-from .common import clock_s, declare_and_validate, node_base, run, stream_qos
+from .common import (clock_s, declare_and_validate, node_base, publish_counted, run,
+                     stream_qos)
 
 STATE_QUEUE_DEPTH = 20      # states (20 ms at 1 kHz): rides out short stalls without a long backlog
 
@@ -62,7 +63,7 @@ def make_node(params: dict):
                 # a re-sent state (lock-step plant waiting for its command): the same answer
                 # again, filter untouched, so lock-step runs stay deterministic
                 self.c.bump('repeated_states')
-                self.pub.publish(self.msg)
+                publish_counted(self, self.pub, self.msg, f'estimate {msg.seq}')
                 return
             t0 = time.perf_counter()
             now = clock_s(self)
@@ -141,7 +142,7 @@ def make_node(params: dict):
             m.stale, m.update_skipped = stale, r.update_skipped
             m.sensor_fault = int(r.sensor_fault)
             m.consistency = int(r.consistency)
-            self.pub.publish(m)
+            publish_counted(self, self.pub, m, f'estimate {seq}')
 
         @diag.reader
         def publish_diagnostics(self):

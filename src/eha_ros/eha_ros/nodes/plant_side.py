@@ -509,7 +509,7 @@ def make_node(params: dict, program: Program):
             if self.lockstep:
                 ns = int(round(self.k * self.Ts * 1e9))
                 st = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-                self.pub_clock.publish(Clock(clock=st))
+                publish_counted(self, self.pub_clock, Clock(clock=st), f'clock {self.k}')
                 return st
             ns = time.time_ns()                   # wall clock, cheaper than Clock.now()
             return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
@@ -537,7 +537,7 @@ def make_node(params: dict, program: Program):
                 speed[i] = tr.motor_speed[i]
                 current[i] = tr.motor_current[i]
                 valve[i] = tr.valve_fraction[i]
-            self.pub_truth.publish(t)
+            publish_counted(self, self.pub_truth, t, f'truth {self.k}')
 
         # ---- start-up and diagnostics (executor thread) ----
         def refuse_if_other_plant(self, wait: float):

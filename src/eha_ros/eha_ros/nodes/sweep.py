@@ -24,8 +24,8 @@ from ..core.sweep.params import SCHEMA, build_plan
 from ..core.stats import LoopStats
 from ..core.sweep.session import from_params, print_table
 from . import diag
-from .common import (PLANT_STATE_TOPIC, declare_and_validate, latched_qos, node_base, run,
-                     stream_qos)
+from .common import (PLANT_STATE_TOPIC, declare_and_validate, latched_qos, node_base,
+                     publish_counted, run, stream_qos)
 
 MARGIN_TICKS = 30           # data of a tick is complete this many ticks after its state
 
@@ -141,10 +141,10 @@ def make_node(params: dict):
             m = self.ref_msg
             m.seq = int(seq)
             m.position = float(position)
-            self.pub.publish(m)
+            publish_counted(self, self.pub, m, f'reference {seq}')
             if self.pub_load is not None:
                 self.load_msg.force = float(load)
-                self.pub_load.publish(self.load_msg)
+                publish_counted(self, self.pub_load, self.load_msg, f'load {seq}')
 
         def end(self, reason=None):
             """Finish the report; reference back to the offset; exit if asked to."""

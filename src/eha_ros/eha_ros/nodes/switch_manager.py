@@ -22,7 +22,8 @@ from ..core.redundancy.params import SCHEMA
 from ..core.stats import Counters, LoopStats
 from ..core.supervisor import LoopSupervisor, SupervisorParams
 from . import diag
-from .common import declare_and_validate, latched_qos, node_base, run, stream_qos
+from .common import (declare_and_validate, latched_qos, node_base, publish_counted, run,
+                     stream_qos)
 
 
 def _finite(*values) -> bool:
@@ -226,7 +227,7 @@ def make_node(params: dict):
                 m.drive_enable = [bool(b) for b in sel.drive_enable]
                 m.valve_open = [bool(b) for b in sel.valve_open]
                 m.bypass_open = bool(sel.bypass_open)
-                self.pub_select.publish(m)
+                publish_counted(self, self.pub_select, m, f'channel_select {seq}')
                 self.sent_select = sel
             if status != self.sent_status:
                 self.publish_status(status, seq)
@@ -252,7 +253,7 @@ def make_node(params: dict):
             m.seq = int(seq)
             m.active_channel, healthy, m.switch_count, m.state, m.reason = status
             m.channel_healthy = [bool(b) for b in healthy]
-            self.pub_status.publish(m)
+            publish_counted(self, self.pub_status, m, f'redundancy status {seq}')
             self.sent_status = status
 
         def on_status_timer(self):
