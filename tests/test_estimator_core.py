@@ -115,6 +115,7 @@ def test_chamber_filter_matches_filterpy_joseph_form(params, measurements):
     for k in ('leakage', 'displacement', 'compliance', 'friction'):   # the plain KF (adaptive
         p[f'estimator.model.adapt_{k}'] = False               # EKF: test_estimator_robust.py)
     p['estimator.model.offset_bound'] = 0.0                   # and no projection
+    p['estimator.model.flow_state'] = False                   # nor the unmodelled flow
     kf = Estimator(p).kf
     assert isinstance(kf, ChamberKF)
     kf.set_moved_gate(-1, 0.0)                               # and no gated offset

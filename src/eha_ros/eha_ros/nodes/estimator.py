@@ -108,7 +108,9 @@ def make_node(params: dict):
                                         f'the sensor)')
             elif verdict == adapt.MODEL:
                 self.get_logger().warning(f'seq {seq}: model_mismatch (adaptive model at its '
-                                          f'bound or persistent innovation bias)')
+                                          f'bound, persistent innovation bias, or an '
+                                          f'unmodelled flow: under load a leak or a drifting '
+                                          f'position sensor)')
             else:
                 self.get_logger().info(f'seq {seq}: consistency ok')
             if adapt.alarm(verdict):         # on /diagnostics now: an alarm shorter than the

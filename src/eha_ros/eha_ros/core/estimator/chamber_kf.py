@@ -129,7 +129,8 @@ class ChamberKF(MeasuredKF):
                  compliance: tuple | None = None, offset_bound: float = 0.0,
                  adapt_gate: float = 0.0, compliance_alpha: float = 1.0,
                  leakage_excitation: float = 0.0, friction: tuple | None = None,
-                 friction_scale: tuple | None = None, external: tuple | None = None):
+                 friction_scale: tuple | None = None, external: tuple | None = None,
+                 flow: bool = False):
         """``leakage``/``displacement``/``compliance``: (q per step, p0, lo, hi) of the relative
         corrections lambda/delta/kappa (:mod:`.adapt`), None: not a state; ``offset_bound``
         [m]: projection bound of the sensor offset b (0: none); ``adapt_gate``: no update of
@@ -141,7 +142,9 @@ class ChamberKF(MeasuredKF):
         (adapt.friction_input; None: eq. 4.36 with F_s, v_eps);
         ``friction_scale``: (q, p0, lo, hi) of the friction scale phi, None: not a state;
         ``external``: (q, p0, lo, hi) of the external-leakage correction epsilon (C_r x
-        (1 + epsilon); lambda then scales C_x only), None: lambda scales both paths."""
+        (1 + epsilon); lambda then scales C_x only), None: lambda scales both paths;
+        ``flow``: the unmodelled flow v_f as a state (adapt.flow_noise; Stribeck friction
+        only: it opens at rest)."""
         self.c, self.Ts, self.F_s, self.v_eps = c, Ts, F_s, v_eps
         self.friction_uses_pressure = False
         corner = None if gm is None else gm[1]
@@ -160,6 +163,11 @@ class ChamberKF(MeasuredKF):
             self.i_load = len(q)
             q.append(q_load)
             p0.append(p0_load)
+        self.i_flow = -1
+        if flow and friction is not None:           # unmodelled flow v_f, starts closed at 0
+            self.i_flow = len(q)
+            q.append(0.0)
+            p0.append(0.0)
         self.i_lam = self.i_del = self.i_kap = self.i_phi = self.i_eps = -1
         self.lam_range = self.del_range = self.kap_range = self.phi_range = (0.0, 0.0)
         self.eps_range = (0.0, 0.0)
@@ -201,11 +209,13 @@ class ChamberKF(MeasuredKF):
                 G[:n_lin] = Gl
                 if self.i_load is not None:
                     F[:n_lin, self.i_load] = Gl[:, 1]     # F_d held over Ts like F_L
-                self.modes.append((F, G))
                 Bq = np.zeros((n_lin, 2))
                 Bq[2, 0] = Bq[3, 1] = c.beta / c.V_d
                 Lq = np.zeros((n, 2))
                 Lq[:n_lin] = zoh(A, Bq, Ts)[1]
+                if self.i_flow >= 0:                      # A_p v_f into A, out of B
+                    F[:n_lin, self.i_flow] = c.A_p * (Lq[:n_lin, 0] - Lq[:n_lin, 1])
+                self.modes.append((F, G))
                 L.append(Lq)
                 split = self.i_eps >= 0
                 D.append(leak_sensitivity(c, A, Ts, n, 'x' if split else 'xr'))
@@ -231,6 +241,10 @@ class ChamberKF(MeasuredKF):
                                                                        self.i_phi)
             fk[adapt.FK_IEPS] = self.i_eps
             self.fk = fk
+        # the largest pressure difference friction alone can hold (adapt.flow_noise): the
+        # static friction at the top of the friction state's range
+        F_top = friction[1] if friction is not None else F_s
+        self.dp_friction = F_top * (1.0 + self.phi_range[1]) / c.A_p
         self.reset()
 
     def reset(self, position: float = 0.0, p_a: float | None = None,

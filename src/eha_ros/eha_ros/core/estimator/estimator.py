@@ -97,7 +97,8 @@ def build_filter(p: dict):
                        leakage_excitation=p[m + 'leakage_excitation'],
                        compliance_alpha=adapt.lowpass_alpha(p[m + 'compliance_lowpass'], pp.Ts),
                        offset_bound=p[m + 'offset_bound'] if gm else 0.0,
-                       friction=fric, friction_scale=phi, external=eps)
+                       friction=fric, friction_scale=phi, external=eps,
+                       flow=p[m + 'flow_state'] and with_p)
         kf.friction_uses_pressure = p[e + 'model.friction_pressure']
         if gm and with_p:       # a load step moves the piston, the sensor offset stays
             kf.set_moved_gate(kf.i_gm, p[m + 'load_jump_z'])
@@ -148,6 +149,11 @@ class Estimator:
         self.load_jump_z = params[m + 'load_jump_z']
         self.q_x, self.q_x_disagree = params[m + 'q'][0], params[m + 'q_x_disagree']
         self.b_dis = params[e + 'noise.position_gm_sigma']
+        self.q_flow, self.flow_k = params[m + 'q_flow'], params[m + 'flow_gate']
+        self.flow_n = round(params[m + 'flow_time'] / self.Ts)
+        self.flow_share, self.flow_report = params[m + 'flow_share'], params[m + 'flow_report']
+        self.flow_active = False    # adapt.flow_noise: an unmodelled flow reported as MODEL
+        self.flow_count = np.zeros(adapt.NFLOW)
         self.monitor_s = np.zeros(adapt.NMS)
         self.noise_k = self._noise_constants(params, pp) if self.chambers else None
         self.noise_s = np.zeros(noise_level.NNS)
@@ -185,6 +191,8 @@ class Estimator:
         self.pd_filt = 0.0          # its low-pass (model input)
         self.detector.reset()
         self.monitor_s[:] = 0.0
+        self.flow_count[:] = 0.0
+        self.flow_active = False
         if self.noise_k is not None:
             noise_level.reset(self.noise_k, self.noise_s, self.kf.R, self.kf.R1, self.kf.Q)
         self.updates = 0
@@ -287,6 +295,13 @@ class Estimator:
         if self.chambers:
             adapt.maneuver(self.kf.Q, self.i_load, pz, self.load_jump_z,
                            self.q_load + self.kf.fs[adapt.FS_Q], self.q_load_jump)
+            kf = self.kf
+            if kf.i_flow >= 0:
+                self.flow_active = adapt.flow_noise(
+                    kf.Q, kf.x, kf.i_flow, kf.i_gm, self.b_dis * self.noise_s[noise_level.NS_SX],
+                    self.flow_k, self.q_flow, kf.fs[adapt.FS_N] >= kf.fk[adapt.FK_NREST],
+                    self.flow_count, self.flow_n, kf.fk, kf.dp_friction, self.flow_share,
+                    self.flow_report)
         self._monitor(position)
         if self.chinniah is not None and pr_ok:
             self._chinniah_step(position)
@@ -297,7 +312,8 @@ class Estimator:
         noise follows the disagreement (adapt.disagree_noise)."""
         d = self.detector
         v = adapt.monitor(self.monitor_k, self.monitor_s, position, self.kf.position,
-                          d.code, d.code == fd.DRIFT, getattr(self.kf, 'edge', 0))
+                          d.code, d.code == fd.DRIFT or self.flow_active,
+                          getattr(self.kf, 'edge', 0))
         if self.chambers:
             adapt.disagree_noise(self.kf.Q, self.kf.x, self.kf.i_gm, self.b_dis, self.monitor_k,
                                  self.monitor_s, self.kf.edge, self.q_x, self.q_x_disagree)

@@ -107,6 +107,25 @@ ESTIMATOR = Schema('estimator', [
     *_adaptive('friction', 'phi', 'chambers with stribeck friction: relative friction correction '
                'phi as a state (F_c, F_s x (1+phi))', 0.0, 1.0, 0.1818, 10.0, [-0.875, 1.375],
                -0.99, 10.0),
+    Param(E + 'model.flow_state', 'bool', '', True,
+          doc='chambers with stribeck friction: an unmodelled flow v_f (velocity units, A_p v_f '
+              'into A, out of B) as a state, opened at rest while the sensor offset is '
+              'implausible, bounded by the leakage of the pressure difference beyond friction '
+              '(adapt.flow_noise)'),
+    Param(E + 'model.q_flow', 'float', '(m/s)^2', 1e-9, 0.0, 1.0,
+          doc='per-step random walk of v_f while open (closed: 0)'),
+    Param(E + 'model.flow_gate', 'float', '', 3.0, 0.0, 1e6,
+          doc='v_f opens while at rest |b| exceeds this many of its stationary sigma (at the '
+              'measured noise level) ...'),
+    Param(E + 'model.flow_time', 'float', 's', 0.1, 0.0, 100.0,
+          doc='... for this long in a row, the pressure difference held within F_s (1 + '
+              'phi_max) / A_p of its value at the start (a held load, not a sinusoidal one)'),
+    Param(E + 'model.flow_share', 'float', '', 1.0, 0.0, 100.0,
+          doc='bound of |v_f|: this x (C_x + C_r) (|p_A - p_B| - F_s (1 + phi_max) / A_p) / A_p, '
+              'the nominal leakage of the pressure difference that friction cannot hold'),
+    Param(E + 'model.flow_report', 'float', 'm/s', 2e-5, 0.0, 1.0,
+          doc='|v_f| above this is reported as model_mismatch (a sensor drift under load looks '
+              'like a leak): the load-step spec\'s steady error (20 um) per second'),
     Param(E + 'model.adapt_gate', 'float', '', 4.0, 0.0, 1e6,
           doc='no update of the adaptive states from a sample whose |position innovation| / '
               'sqrt(S) exceeds this (0: always): a fast transient the model cannot explain '

@@ -41,7 +41,9 @@ K_IMOVED, K_MOVEDZ = 65, 66
 K_FK = 67              # adapt.NFK entries: the friction model's constants
 K_NADAPT = K_FK + adapt.NFK     # 1: the sensors' noise level is measured (noise_level)
 K_NL = K_NADAPT + 1    # noise_level.NNK entries: its constants
-NK = K_NL + noise_level.NNK
+K_IFLOW = K_NL + noise_level.NNK
+K_QFLOW, K_FLOWK, K_FLOWN, K_FLOWDP, K_FLOWSH, K_FLOWREP = (K_IFLOW + i for i in range(1, 7))
+NK = K_FLOWREP + 1
 assert K_MON + adapt.NMK == K_STRIBECK
 # state
 E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
@@ -58,7 +60,8 @@ E_CLIPPED = 27         # chamber filter: updates in a row that clipped a paramet
 E_MON = 28             # adapt.NMS entries: the consistency monitor's state
 E_FS = E_MON + adapt.NMS   # adapt.NFS entries: the friction model's state
 E_NL = E_FS + adapt.NFS    # noise_level.NNS entries: the noise level's state
-NE = E_NL + noise_level.NNS
+E_FLOWN = E_NL + noise_level.NNS   # adapt.NFLOW entries: adapt.flow_noise's state
+NE = E_FLOWN + adapt.NFLOW
 CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
 
 
@@ -113,6 +116,11 @@ def pack(est):
         k[K_NADAPT] = 1.0
         k[K_NL:K_NL + noise_level.NNK] = est.noise_k
     e[E_NL:E_NL + noise_level.NNS] = est.noise_s
+    k[K_IFLOW] = kf.i_flow if est.chambers else -1.0
+    k[K_QFLOW], k[K_FLOWK], k[K_FLOWN] = est.q_flow, est.flow_k, est.flow_n
+    k[K_FLOWDP] = kf.dp_friction if est.chambers else 0.0
+    k[K_FLOWSH], k[K_FLOWREP] = est.flow_share, est.flow_report
+    e[E_FLOWN:E_FLOWN + adapt.NFLOW] = est.flow_count
     k[K_JUMP], k[K_JUMP_N] = d.jump_threshold, d.jump_debounce
     k[K_STUCK_N], k[K_STUCK_TOL] = d.stuck_samples, d.stuck_tolerance
     k[K_DRIFT_K], k[K_DRIFT_H], k[K_DRIFT_N] = d.drift_k, d.drift_h, d.drift_debounce
@@ -167,6 +175,7 @@ def unpack(est, e) -> None:
     d.y_prev, d.stepped = float(e[E_YPREV]), bool(e[E_STEPPED] > 0.5)
     est.monitor_s[:] = e[E_MON:E_MON + adapt.NMS]
     est.noise_s[:] = e[E_NL:E_NL + noise_level.NNS]
+    est.flow_count[:] = e[E_FLOWN:E_FLOWN + adapt.NFLOW]
     if est.chambers:
         kf = est.kf
         kf.edge = int(e[E_EDGE])
@@ -353,11 +362,18 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
                                   e[E_CLIPPED:E_CLIPPED + 1], adapt.EDGE_TICKS)
     e[E_UPDATES] += 1
     detect(k, e, position, innov, s00, pz)
+    flow = False
     if k[K_CHAMBERS] > 0.5:
         adapt.maneuver(Q, int(k[K_ILOAD]), pz, k[K_LOADZ],
                        k[K_QLOAD] + e[E_FS + adapt.FS_Q], k[K_QLOADJ])
+        flow = adapt.flow_noise(
+            Q, x, int(k[K_IFLOW]), int(k[K_IGM]), k[K_BDIS] * e[E_NL + noise_level.NS_SX],
+            k[K_FLOWK], k[K_QFLOW],
+            k[K_STRIBECK] > 0.5 and e[E_FS + adapt.FS_N] >= k[K_FK + adapt.FK_NREST],
+            e[E_FLOWN:E_FLOWN + adapt.NFLOW], k[K_FLOWN], k[K_FK:K_FK + adapt.NFK],
+            k[K_FLOWDP], k[K_FLOWSH], k[K_FLOWREP])
     adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
-                  int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT, int(e[E_EDGE]))
+                  int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT or flow, int(e[E_EDGE]))
     if k[K_CHAMBERS] > 0.5:
         adapt.disagree_noise(Q, x, int(k[K_IGM]), k[K_BDIS], k[K_MON:K_MON + adapt.NMK],
                              e[E_MON:E_MON + adapt.NMS], int(e[E_EDGE]), k[K_QX], k[K_QXD])

@@ -156,6 +156,22 @@ def connect(workers: int | None, scheduler: str | None, quiet: bool = False):
     return Client(cluster), cluster
 
 
+def _silence_distributed() -> None:
+    import logging
+    logging.getLogger('distributed').setLevel(logging.CRITICAL)
+
+
+def quiet_shutdown(client) -> None:
+    """Before our own LocalCluster closes: its workers stop logging, so a heartbeat on a comm
+    the closing scheduler already dropped ('... is closed', an ERROR with a Traceback from
+    distributed.comm.tcp, seen after Ctrl-C) does not reach the CLI's stderr. Runs' errors are
+    rows (run_chunk) and a dead worker raises in the client, so nothing else is lost."""
+    try:
+        client.run(_silence_distributed, wait=True)
+    except Exception:             # a worker already gone: nothing of it left to silence
+        pass
+
+
 def chunks(ids: list, n_workers: int, size: int | None = None) -> list:
     """Split run ids into chunks, largest first (guided scheduling): each about a quarter of
     the remaining runs per worker, at most 8 (a lost worker costs little) and down to 1 at
@@ -404,6 +420,8 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         return CampaignResult(out, info, df)
     finally:
         if own:
+            if cluster is not None:
+                quiet_shutdown(client)
             client.close()
             if cluster is not None:
                 cluster.close()
