@@ -392,3 +392,16 @@ def test_second_plant_seen_after_the_start_is_refused(tmp_path, monkeypatch):
     assert str(err.value).startswith('another EHA stack runs on ROS domain')
     assert '--domain-id' in str(err.value) and '\n' not in str(err.value)
     assert ours.stopped and not out.exists()
+    # while our nodes are brought up (CI: the other stack's plant_sim answered our configure,
+    # 'not possible from inactive', and the run waited for its start timeout): a node of ours
+    # shown twice by the graph is another stack, even before its plant publishes
+    out.mkdir()
+    graph = [('plant_sim', '/'), ('controller', '/'), ('plant_sim', '/'), ('run_stack', '/')]
+    twice = SimpleNamespace(publishers=lambda topic, wait: [], close=lambda: None,
+                            node=SimpleNamespace(get_node_names_and_namespaces=lambda: graph))
+    ours = Stack()
+    RS._refuse_late(ours, twice, str(out), nodes=('controller',))
+    assert not ours.stopped
+    with pytest.raises(UsageError) as err:
+        RS._refuse_late(ours, twice, str(out), nodes=('plant_sim', 'controller'))
+    assert '/plant_sim' in str(err.value) and ours.stopped and not out.exists()

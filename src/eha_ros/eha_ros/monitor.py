@@ -140,15 +140,28 @@ class DiagMonitor:
             rclpy.try_shutdown()
 
 
+def duplicated_nodes(monitor: DiagMonitor, nodes) -> list[str]:
+    """Those of ``nodes`` (names in the root namespace) the graph shows more than once: ours
+    and another stack's (a lifecycle call to one of them may be answered by the other)."""
+    if not nodes:
+        return []
+    graph = monitor.node.get_node_names_and_namespaces()
+    return [f'/{n}' for n in nodes if sum(1 for g, ns in graph if g == n and ns == '/') > 1]
+
+
 def refuse_second_stack(monitor: DiagMonitor, hint: str, wait: float = DISCOVERY_WAIT,
-                        own: int = 0):
+                        own: int = 0, nodes=()):
     """UsageError (one line, exit 2) when a plant other than our ``own`` (0 or 1) publishes
     PLANT_TOPIC on this ROS domain: two stacks on one domain would drive each other's nodes
     (states, commands, fault injections and lock-step clocks mix). ``hint`` says how to start
     one beside it. Checked before the start (discovery may show a stack later than ``wait``
-    on a loaded machine) and again once our own loop runs (own=1, wait=0)."""
+    on a loaded machine), while our nodes are brought up (``nodes``: ours, seen twice) and
+    once our own loop runs (own=1, wait=0)."""
     names = monitor.publishers(PLANT_TOPIC, wait)
-    if len(names) > own:
+    twice = duplicated_nodes(monitor, nodes)
+    if twice:
+        names = names or twice
+    if len(names) > own or twice:
         raise UsageError(f'another EHA stack runs on ROS domain '
                          f'{os.environ.get("ROS_DOMAIN_ID", "0")} '
                          f'({", ".join(sorted(set(names)))} publishes '

@@ -206,14 +206,22 @@ def wait_for_loop(stack, monitor, plant: str, timeout: float) -> str:
     return 'duration'
 
 
-def bring_up(manager, stack, p: dict, deadline: float) -> str:
-    """The managed nodes up: '' when done, else the run's stop reason."""
+def bring_up(manager, stack, p: dict, deadline: float, monitor=None, out: str = '') -> str:
+    """The managed nodes up: '' when done, else the run's stop reason. While a transition is
+    retried, another stack's node of the same name (discovery had not shown its plant before
+    the start) is refused as before the start (its node may be the one answering)."""
     plant = p['plant']
     steps = [(plant, 'configure', True), ('controller', 'configure', False),
              ('controller', 'activate', False)]
     if p['activate']:
         steps.append((plant, 'activate', True))
-    why = manager.bring_up(steps, deadline, stack.dead)
+
+    def dead():
+        gone = stack.dead()
+        if not gone and monitor is not None:
+            _refuse_late(stack, monitor, out, nodes=(plant, 'controller'))
+        return gone
+    why = manager.bring_up(steps, deadline, dead)
     if why:
         return why if why.startswith('node exited') else f'lifecycle: {why}'
     if not p['activate']:
@@ -237,13 +245,15 @@ def progress_line(elapsed: float, loop: dict, cpu: dict) -> str:
             f'overruns {loop.get("overruns", 0)}; CPU {cpu_text}')
 
 
-def _refuse_late(stack, monitor, out: str) -> None:
-    """Our loop runs: a second plant on the domain now is another stack that discovery had
-    not shown before the start (a loaded machine): stop ours, drop its run folder (nothing
-    ran), and refuse as before the start."""
+def _refuse_late(stack, monitor, out: str, nodes=()) -> None:
+    """Our loop runs (or our nodes are being brought up: ``nodes`` seen twice): a second
+    plant on the domain now is another stack that discovery had not shown before the start
+    (a loaded machine): stop ours, drop its run folder (nothing ran), and refuse as before
+    the start."""
     from ..monitor import refuse_second_stack
     try:
-        refuse_second_stack(monitor, 'scripts/run_stack --domain-id N', wait=0.0, own=1)
+        refuse_second_stack(monitor, 'scripts/run_stack --domain-id N', wait=0.0, own=1,
+                            nodes=nodes)
     except UsageError:
         stopping()
         stack.stop()
@@ -291,7 +301,7 @@ def run(args, signals=()) -> int:
     t_start = time.monotonic()
     reason = 'duration'
     try:
-        reason = bring_up(manager, stack, p, t_start + args.start_timeout)
+        reason = bring_up(manager, stack, p, t_start + args.start_timeout, monitor, out)
         if not reason:
             reason = wait_for_loop(stack, monitor, p['plant'], args.start_timeout)
         if reason == 'duration':
