@@ -175,7 +175,8 @@ def test_unmodelled_flow_holds_a_leak_the_adaptive_states_cannot_split():
     with_flow = scenarios.run(scn, nominal, row, 1, trace=False)[0]['steady_error_m']
     nominal['estimator'] = dict(nominal['estimator'], **{'estimator.model.flow_state': False})
     without = scenarios.run(scn, nominal, row, 1, trace=False)[0]['steady_error_m']
-    print(f'\nsteady error with the flow state {with_flow * 1e6:.1f} um, without {without * 1e6:.1f} um')
+    print(f'\nsteady error with the flow state {with_flow * 1e6:.1f} um, '
+          f'without {without * 1e6:.1f} um')
     assert without > 100e-6
     assert with_flow < 20e-6
 

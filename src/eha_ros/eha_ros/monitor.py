@@ -159,12 +159,10 @@ def refuse_second_stack(monitor: DiagMonitor, hint: str, wait: float = DISCOVERY
     once our own loop runs (own=1, wait=0)."""
     names = monitor.publishers(PLANT_TOPIC, wait)
     twice = duplicated_nodes(monitor, nodes)
-    if twice:
-        names = names or twice
     if len(names) > own or twice:
         raise UsageError(f'another EHA stack runs on ROS domain '
                          f'{os.environ.get("ROS_DOMAIN_ID", "0")} '
-                         f'({", ".join(sorted(set(names)))} publishes '
+                         f'({", ".join(sorted(set(names or twice)))} publishes '
                          f'{PLANT_TOPIC}): stop it, or run this one on a domain of its own: '
                          f'{hint}')
 

@@ -26,8 +26,8 @@ def hardware(p: dict, counters):
     return AdsHardware(p, counters, p['bridge.stale_limit'])
 
 
-PROGRAM = Program('hardware_bridge', SCHEMA, LOOP_PREFIX['hardware_bridge'], hardware, bridge_services=True,
-                  exclusive=True)
+PROGRAM = Program('hardware_bridge', SCHEMA, LOOP_PREFIX['hardware_bridge'], hardware,
+                  bridge_services=True, exclusive=True)
 
 
 def make_node(params: dict):

@@ -27,7 +27,8 @@ def state_label(node) -> str:
 
 
 def autostart(node, target: str) -> None:
-    """Reach ``target`` (unconfigured, inactive, active) by itself, as a manager would by change_state."""
+    """Reach ``target`` (unconfigured, inactive, active) by itself, as a manager would by
+    change_state."""
     if target in ('inactive', 'active'):
         node.trigger_configure()
     if target == 'active' and state_label(node) == 'inactive':
