@@ -154,9 +154,14 @@ class Estimator:
         self.flow_share, self.flow_report = params[m + 'flow_share'], params[m + 'flow_report']
         self.flow_active = False    # adapt.flow_noise: an unmodelled flow reported as MODEL
         self.flow_count = np.zeros(adapt.NFLOW)
+        self.offset_gate, self.q_x_offset = params[m + 'offset_gate'], params[m + 'q_x_offset']
+        self.offset_alpha = tuple(self.Ts / params[m + key] for key in (
+            'offset_time', 'offset_load_mean', 'offset_load_time'))
+        self.offset_s = np.zeros(adapt.NOFS)     # adapt.offset_noise's state
         self.monitor_s = np.zeros(adapt.NMS)
         self.noise_k = self._noise_constants(params, pp) if self.chambers else None
         self.noise_s = np.zeros(noise_level.NNS)
+        self.noise_s[[noise_level.NS_SX, noise_level.NS_SP]] = 1.0   # datasheet's unless measured
         self.chinniah = None
         if params[e + 'chinniah.enabled']:
             from .chinniah import Chinniah3, Chinniah4
@@ -193,6 +198,7 @@ class Estimator:
         self.monitor_s[:] = 0.0
         self.flow_count[:] = 0.0
         self.flow_active = False
+        self.offset_s[:] = 0.0
         if self.noise_k is not None:
             noise_level.reset(self.noise_k, self.noise_s, self.kf.R, self.kf.R1, self.kf.Q)
         self.updates = 0
@@ -302,6 +308,9 @@ class Estimator:
                     self.flow_k, self.q_flow, kf.fs[adapt.FS_N] >= kf.fk[adapt.FK_NREST],
                     self.flow_count, self.flow_n, kf.fk, kf.dp_friction, self.flow_share,
                     self.flow_report)
+            adapt.offset_noise(kf.x, kf.i_gm, self.b_dis * self.noise_s[noise_level.NS_SX],
+                               self.offset_s, *self.offset_alpha, self.offset_gate,
+                               kf.dp_friction)
         self._monitor(position)
         if self.chinniah is not None and pr_ok:
             self._chinniah_step(position)
@@ -312,12 +321,19 @@ class Estimator:
         noise follows the disagreement (adapt.disagree_noise)."""
         d = self.detector
         v = adapt.monitor(self.monitor_k, self.monitor_s, position, self.kf.position,
-                          d.code, d.code == fd.DRIFT or self.flow_active,
+                          d.code, d.code == fd.DRIFT or self.flow_active or self.offset_open,
                           getattr(self.kf, 'edge', 0))
         if self.chambers:
             adapt.disagree_noise(self.kf.Q, self.kf.x, self.kf.i_gm, self.b_dis, self.monitor_k,
-                                 self.monitor_s, self.kf.edge, self.q_x, self.q_x_disagree)
+                                 self.monitor_s, self.kf.edge, self.q_x, self.q_x_disagree,
+                                 self.offset_open, self.q_x_offset)
         return v
+
+    @property
+    def offset_open(self) -> bool:
+        """The sensor offset was implausible under load at the last update (adapt.offset_noise):
+        the position noise is open part way, reported as model_mismatch."""
+        return bool(self.offset_s[adapt.OF_OPEN])
 
     @property
     def consistency(self) -> int:

@@ -43,7 +43,9 @@ K_NADAPT = K_FK + adapt.NFK     # 1: the sensors' noise level is measured (noise
 K_NL = K_NADAPT + 1    # noise_level.NNK entries: its constants
 K_IFLOW = K_NL + noise_level.NNK
 K_QFLOW, K_FLOWK, K_FLOWN, K_FLOWDP, K_FLOWSH, K_FLOWREP = (K_IFLOW + i for i in range(1, 7))
-NK = K_FLOWREP + 1
+K_OFFG, K_QXO = K_FLOWREP + 1, K_FLOWREP + 2     # adapt.offset_noise: gate, position noise
+K_OFFA = K_QXO + 1     # 3 entries: its alphas (b, the pressure difference's mean, variance)
+NK = K_OFFA + 3
 assert K_MON + adapt.NMK == K_STRIBECK
 # state
 E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
@@ -61,7 +63,8 @@ E_MON = 28             # adapt.NMS entries: the consistency monitor's state
 E_FS = E_MON + adapt.NMS   # adapt.NFS entries: the friction model's state
 E_NL = E_FS + adapt.NFS    # noise_level.NNS entries: the noise level's state
 E_FLOWN = E_NL + noise_level.NNS   # adapt.NFLOW entries: adapt.flow_noise's state
-NE = E_FLOWN + adapt.NFLOW
+E_OFFS = E_FLOWN + adapt.NFLOW    # adapt.NOFS entries: adapt.offset_noise's state
+NE = E_OFFS + adapt.NOFS
 CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
 
 
@@ -121,6 +124,9 @@ def pack(est):
     k[K_FLOWDP] = kf.dp_friction if est.chambers else 0.0
     k[K_FLOWSH], k[K_FLOWREP] = est.flow_share, est.flow_report
     e[E_FLOWN:E_FLOWN + adapt.NFLOW] = est.flow_count
+    k[K_OFFG], k[K_QXO] = est.offset_gate, est.q_x_offset
+    k[K_OFFA:K_OFFA + 3] = est.offset_alpha
+    e[E_OFFS:E_OFFS + adapt.NOFS] = est.offset_s
     k[K_JUMP], k[K_JUMP_N] = d.jump_threshold, d.jump_debounce
     k[K_STUCK_N], k[K_STUCK_TOL] = d.stuck_samples, d.stuck_tolerance
     k[K_DRIFT_K], k[K_DRIFT_H], k[K_DRIFT_N] = d.drift_k, d.drift_h, d.drift_debounce
@@ -176,6 +182,7 @@ def unpack(est, e) -> None:
     est.monitor_s[:] = e[E_MON:E_MON + adapt.NMS]
     est.noise_s[:] = e[E_NL:E_NL + noise_level.NNS]
     est.flow_count[:] = e[E_FLOWN:E_FLOWN + adapt.NFLOW]
+    est.offset_s[:] = e[E_OFFS:E_OFFS + adapt.NOFS]
     if est.chambers:
         kf = est.kf
         kf.edge = int(e[E_EDGE])
@@ -372,9 +379,15 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
             k[K_STRIBECK] > 0.5 and e[E_FS + adapt.FS_N] >= k[K_FK + adapt.FK_NREST],
             e[E_FLOWN:E_FLOWN + adapt.NFLOW], k[K_FLOWN], k[K_FK:K_FK + adapt.NFK],
             k[K_FLOWDP], k[K_FLOWSH], k[K_FLOWREP])
+        adapt.offset_noise(x, int(k[K_IGM]), k[K_BDIS] * e[E_NL + noise_level.NS_SX],
+                           e[E_OFFS:E_OFFS + adapt.NOFS], k[K_OFFA], k[K_OFFA + 1],
+                           k[K_OFFA + 2], k[K_OFFG], k[K_FLOWDP])
+    offset = e[E_OFFS + adapt.OF_OPEN] > 0.5
     adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
-                  int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT or flow, int(e[E_EDGE]))
+                  int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT or flow or offset,
+                  int(e[E_EDGE]))
     if k[K_CHAMBERS] > 0.5:
         adapt.disagree_noise(Q, x, int(k[K_IGM]), k[K_BDIS], k[K_MON:K_MON + adapt.NMK],
-                             e[E_MON:E_MON + adapt.NMS], int(e[E_EDGE]), k[K_QX], k[K_QXD])
+                             e[E_MON:E_MON + adapt.NMS], int(e[E_EDGE]), k[K_QX], k[K_QXD],
+                             offset, k[K_QXO])
     return x[0], innov, nis, m, int(e[E_CODE])
