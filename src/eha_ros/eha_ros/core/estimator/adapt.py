@@ -279,8 +279,9 @@ def monitor(mk, ms, z, x_hat, sensor_code, drift, edge) -> int:
     model error do not).
 
     - MODEL: a slow persistent innovation bias (the detector's CUSUM), an adaptive state on
-      its bound, an unmodelled flow or an implausible offset under load (``drift``: the
-      callers' or of these): the model is wrong; adaptation absorbs what is within its ranges;
+      its bound, an unmodelled flow or an implausible offset under load (the callers pass the
+      first, the flow and the offset as ``drift``): the model is wrong; adaptation absorbs what
+      is within its ranges;
     - DISAGREE: |low-passed d| above the sensor's error band for MK_N samples: the filter
       holds the estimate away from the measurement by more than the sensor can be wrong;
     - SENSOR: the fault detector reports a stuck sensor (frozen readings), or a jump (a fast
