@@ -186,7 +186,8 @@ def test_offset_is_a_model_error_only_under_a_varying_load():
     the position noise under a 1 Hz 5 kN load (2 MPa), after the variance of the pressure
     difference has built up; never with b within its gate, never without a load (b growing
     there is a sensor drift, DISAGREE's), never on a held load or a 5 kN load step (a step adds
-    at most a quarter of its square), never with the gate 0."""
+    at most 1/16 of its square), never with the gate 0. adapt.load_varying, which keeps the
+    unmodelled flow v_f closed, says the same about the load whatever the gate."""
     Ts, b_sigma, dp_load = 1e-3, 20e-6, 0.74e6
     alphas = (Ts / 0.5, Ts / 0.25, Ts / 2.0)
     t = np.arange(6000) * Ts
@@ -195,9 +196,15 @@ def test_offset_is_a_model_error_only_under_a_varying_load():
 
     def opened(dp, b, gate=2.0):
         x, of, out = np.zeros(6), np.zeros(adapt.NOFS), np.zeros(t.size, bool)
+        varying = np.zeros(t.size, bool)
         for k in range(t.size):
             x[2], x[3], x[5] = 5e6 + dp[k] + noise[k], 5e6, b
             out[k] = adapt.offset_noise(x, 5, b_sigma, of, *alphas, gate, dp_load)
+            varying[k] = adapt.load_varying(of, dp_load)
+        assert not (out & ~varying).any()
+        if gate == 0.0:
+            assert not out.any()                 # off
+            return varying                       # the load test alone
         return out
 
     sine = 1.94e6 * np.sin(2 * np.pi * t)
@@ -210,7 +217,9 @@ def test_offset_is_a_model_error_only_under_a_varying_load():
     step = np.where(t >= 1.0, 1.94e6, 0.0)
     assert not opened(step, 5 * b_sigma).any()                     # a load step, then held
     assert not opened(step[::-1], 5 * b_sigma).any()               # ... and its removal
-    assert not opened(sine, 5 * b_sigma, gate=0.0).any()
+    assert not opened(sine, 5 * b_sigma, gate=0.0)[:500].any()       # the variance builds up
+    assert opened(sine, 5 * b_sigma, gate=0.0)[t > 2.0].all()       # a varying load: v_f closed
+    assert not opened(step, 0.0, gate=0.0).any()                    # a held load: v_f's
 
 
 GRID = dict(friction=1.0, noise=1.0, leak_split=1.0)     # Table 4.5: the datasheet's

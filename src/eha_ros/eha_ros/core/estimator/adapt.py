@@ -345,17 +345,25 @@ def offset_noise(x, i_gm, b_sigma, of, alpha, alpha_m, alpha_v, gate, dp_load) -
     growing there is a sensor drift, the monitor's DISAGREE. Measured with a 5 kN 1 Hz
     sinusoidal load on C_eq x1.9, D_p x0.85, noise x1.9 (random:200 plant 153): b swung
     +-150 um (4 sigma) while the truth moved +-106 um around a held estimate (47 kN/mm)."""
+    dp = x[2] - x[3]
+    of[OF_DPM] += alpha_m * (dp - of[OF_DPM])
+    of[OF_DPV] += alpha_v * ((dp - of[OF_DPM]) ** 2 - of[OF_DPV])
     if i_gm < 0 or gate <= 0.0:
         of[OF_OPEN] = 0.0
         return False
     r = x[i_gm] / b_sigma
-    dp = x[2] - x[3]
     of[OF_B2] += alpha * (r * r - of[OF_B2])
-    of[OF_DPM] += alpha_m * (dp - of[OF_DPM])
-    of[OF_DPV] += alpha_v * ((dp - of[OF_DPM]) ** 2 - of[OF_DPV])
-    is_open = of[OF_B2] > gate * gate and of[OF_DPV] > dp_load * dp_load
+    is_open = of[OF_B2] > gate * gate and load_varying(of, dp_load)
     of[OF_OPEN] = 1.0 if is_open else 0.0
     return is_open
+
+
+@njit(cache=True)
+def load_varying(of, dp_load) -> bool:
+    """The pressure difference varies by more than dp_load rms (:func:`offset_noise`'s state,
+    updated whatever its gate): a varying load, :func:`offset_noise`'s domain; a held one is
+    :func:`flow_noise`'s."""
+    return of[OF_DPV] > dp_load * dp_load
 
 
 @njit(cache=True)
@@ -388,7 +396,8 @@ def flow_noise(Q, x, i_flow, i_gm, b_sigma, k, q_open, rest, count, n_open, fk, 
     """Unmodelled flow v_f (velocity units: A_p v_f into chamber A, out of B; issue 15): a
     persistent velocity bias of the flow model, which the adaptive states cannot separate at
     one operating point, is not a sensor offset. Its random walk opens (q_open, else closed)
-    while the piston rests and the sensor-offset estimate b has sat beyond k of its own
+    while the piston rests (``rest``; the callers also require the load not to vary,
+    :func:`load_varying`) and the sensor-offset estimate b has sat beyond k of its own
     stationary sigma (b_sigma: the Gauss-Markov sigma at the measured noise level) for n_open
     updates in a row with the pressure difference within dp_fric of its value at the run's
     start (count: FL_N that run, FL_DP that value; a held load, not a sinusoidal one, whose

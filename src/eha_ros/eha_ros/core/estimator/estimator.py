@@ -302,15 +302,16 @@ class Estimator:
             adapt.maneuver(self.kf.Q, self.i_load, pz, self.load_jump_z,
                            self.q_load + self.kf.fs[adapt.FS_Q], self.q_load_jump)
             kf = self.kf
+            b_sigma = self.b_dis * self.noise_s[noise_level.NS_SX]
+            adapt.offset_noise(kf.x, kf.i_gm, b_sigma, self.offset_s, *self.offset_alpha,
+                               self.offset_gate, kf.dp_friction)
             if kf.i_flow >= 0:
+                rest = (kf.fs[adapt.FS_N] >= kf.fk[adapt.FK_NREST]
+                        and not adapt.load_varying(self.offset_s, kf.dp_friction))
                 self.flow_active = adapt.flow_noise(
-                    kf.Q, kf.x, kf.i_flow, kf.i_gm, self.b_dis * self.noise_s[noise_level.NS_SX],
-                    self.flow_k, self.q_flow, kf.fs[adapt.FS_N] >= kf.fk[adapt.FK_NREST],
+                    kf.Q, kf.x, kf.i_flow, kf.i_gm, b_sigma, self.flow_k, self.q_flow, rest,
                     self.flow_count, self.flow_n, kf.fk, kf.dp_friction, self.flow_share,
                     self.flow_report)
-            adapt.offset_noise(kf.x, kf.i_gm, self.b_dis * self.noise_s[noise_level.NS_SX],
-                               self.offset_s, *self.offset_alpha, self.offset_gate,
-                               kf.dp_friction)
         self._monitor(position)
         if self.chinniah is not None and pr_ok:
             self._chinniah_step(position)

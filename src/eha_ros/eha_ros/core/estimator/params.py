@@ -114,9 +114,9 @@ ESTIMATOR = Schema('estimator', [
               '(adapt.flow_noise)'),
     Param(E + 'model.q_flow', 'float', '(m/s)^2', 1e-9, 0.0, 1.0,
           doc='per-step random walk of v_f while open (closed: 0)'),
-    Param(E + 'model.flow_gate', 'float', '', 3.0, 0.0, 1e6,
-          doc='v_f opens while at rest |b| exceeds this many of its stationary sigma (at the '
-              'measured noise level) ...'),
+    Param(E + 'model.flow_gate', 'float', '', 2.0, 0.0, 1e6,
+          doc='v_f opens while at rest, the load not varying (adapt.load_varying), |b| exceeds '
+              'this many of its stationary sigma (at the measured noise level) ...'),
     Param(E + 'model.flow_time', 'float', 's', 0.1, 0.0, 100.0,
           doc='... for this long in a row, the pressure difference held within F_s (1 + '
               'phi_max) / A_p of its value at the start (a held load, not a sinusoidal one)'),

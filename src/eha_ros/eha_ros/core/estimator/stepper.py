@@ -373,15 +373,16 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
     if k[K_CHAMBERS] > 0.5:
         adapt.maneuver(Q, int(k[K_ILOAD]), pz, k[K_LOADZ],
                        k[K_QLOAD] + e[E_FS + adapt.FS_Q], k[K_QLOADJ])
+        b_sigma = k[K_BDIS] * e[E_NL + noise_level.NS_SX]
+        of = e[E_OFFS:E_OFFS + adapt.NOFS]
+        adapt.offset_noise(x, int(k[K_IGM]), b_sigma, of, k[K_OFFA], k[K_OFFA + 1],
+                           k[K_OFFA + 2], k[K_OFFG], k[K_FLOWDP])
+        rest = (k[K_STRIBECK] > 0.5 and e[E_FS + adapt.FS_N] >= k[K_FK + adapt.FK_NREST]
+                and not adapt.load_varying(of, k[K_FLOWDP]))
         flow = adapt.flow_noise(
-            Q, x, int(k[K_IFLOW]), int(k[K_IGM]), k[K_BDIS] * e[E_NL + noise_level.NS_SX],
-            k[K_FLOWK], k[K_QFLOW],
-            k[K_STRIBECK] > 0.5 and e[E_FS + adapt.FS_N] >= k[K_FK + adapt.FK_NREST],
+            Q, x, int(k[K_IFLOW]), int(k[K_IGM]), b_sigma, k[K_FLOWK], k[K_QFLOW], rest,
             e[E_FLOWN:E_FLOWN + adapt.NFLOW], k[K_FLOWN], k[K_FK:K_FK + adapt.NFK],
             k[K_FLOWDP], k[K_FLOWSH], k[K_FLOWREP])
-        adapt.offset_noise(x, int(k[K_IGM]), k[K_BDIS] * e[E_NL + noise_level.NS_SX],
-                           e[E_OFFS:E_OFFS + adapt.NOFS], k[K_OFFA], k[K_OFFA + 1],
-                           k[K_OFFA + 2], k[K_OFFG], k[K_FLOWDP])
     offset = e[E_OFFS + adapt.OF_OPEN] > 0.5
     adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
                   int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT or flow or offset,
