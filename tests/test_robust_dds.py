@@ -32,10 +32,13 @@ LOAD_PEAK_FACTOR = {'leaky': 1.35, 'tight': 1.25}
 # closed on the noise-free measured position (no estimator) ends 20.2 um off there (batch,
 # tests/test_estimator_robust.py; the linear loop 14 um: the nonlinear boost circuit loses C_r
 # of the loaded side), so the 20 um of issue 15 holds only with the estimator adding nothing.
-# Measured over DDS with the estimator: 27.8 and 45.5 um in two runs. Limit here: that
+# Measured over DDS with the estimator: 27.8 and 45.5 um in two runs; 2026-11-25 (v_f's gate
+# at 2 sigma) 0.2-14.8 um in 7 runs here and 57.1 um once in CI; in batch over 30 noise seeds
+# median 20.1 um, 90 % 35.0 um, max 43.4 um (gate 3: 21.5 / 38.3 / 43.4). Limit here: that
 # controller residual + the estimator's share of the batch test (10 um) + the 1 s mean of the
-# sensor's Gauss-Markov offset over DDS's own noise (2 sigma, 21 um).
-LOAD_STEADY_LIMIT = {'leaky': 20.2e-6 + 10e-6 + 21e-6, 'tight': 20e-6}
+# sensor's Gauss-Markov offset over DDS's own noise at 3 sigma (31.5 um; at 2 sigma, 21 um,
+# the limit failed about one run in 40 by its own construction).
+LOAD_STEADY_LIMIT = {'leaky': 20.2e-6 + 10e-6 + 31.5e-6, 'tight': 20e-6}
 TS = 1e-3
 
 
