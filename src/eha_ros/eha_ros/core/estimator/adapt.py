@@ -72,9 +72,9 @@ MS_D, MS_N, MS_HOLD, MS_VERDICT, MS_DET, MS_DMAX = 0, 1, 2, 3, 4, 5
 NMS = 6
 
 # flow_noise state (array fl): the run of updates meeting its gate, the pressure difference
-# at the run's start
-FL_N, FL_DP = 0, 1
-NFLOW = 2
+# at the run's start, reported (1) or not
+FL_N, FL_DP, FL_ACTIVE = 0, 1, 2
+NFLOW = 3
 
 # offset_noise state (array of): mean square of b / b_sigma, mean and variance of p_A - p_B,
 # open (1) or not
@@ -400,7 +400,8 @@ def flow_noise(Q, x, i_flow, i_gm, b_sigma, k, q_open, rest, count, n_open, fk, 
     :func:`load_varying`) and the sensor-offset estimate b has sat beyond k of its own
     stationary sigma (b_sigma: the Gauss-Markov sigma at the measured noise level) for n_open
     updates in a row with the pressure difference within dp_fric of its value at the run's
-    start (count: FL_N that run, FL_DP that value; a held load, not a sinusoidal one, whose
+    start (count: FL_N that run, FL_DP that value, FL_ACTIVE the result; a held load, not a
+    sinusoidal one, whose
     reversing flows a walk would only chase), and it is projected onto
 
         |v_f| <= share (C_x + C_r) max(0, |p_A - p_B| - dp_fric) / A_p
@@ -424,7 +425,9 @@ def flow_noise(Q, x, i_flow, i_gm, b_sigma, k, q_open, rest, count, n_open, fk, 
     v_max = share * (fk[FK_CX] + fk[FK_CR]) * max(0.0, abs(dp) - dp_fric) / fk[FK_AP]
     Q[i_flow, i_flow] = q_open if count[FL_N] >= n_open and v_max > 0.0 else 0.0
     x[i_flow] = clip(x[i_flow], -v_max, v_max)
-    return abs(x[i_flow]) > v_report
+    active = abs(x[i_flow]) > v_report
+    count[FL_ACTIVE] = 1.0 if active else 0.0
+    return active
 
 
 @njit(cache=True)

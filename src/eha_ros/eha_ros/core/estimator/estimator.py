@@ -152,8 +152,7 @@ class Estimator:
         self.q_flow, self.flow_k = params[m + 'q_flow'], params[m + 'flow_gate']
         self.flow_n = round(params[m + 'flow_time'] / self.Ts)
         self.flow_share, self.flow_report = params[m + 'flow_share'], params[m + 'flow_report']
-        self.flow_active = False    # adapt.flow_noise: an unmodelled flow reported as MODEL
-        self.flow_count = np.zeros(adapt.NFLOW)
+        self.flow_s = np.zeros(adapt.NFLOW)       # adapt.flow_noise's state
         self.offset_gate, self.q_x_offset = params[m + 'offset_gate'], params[m + 'q_x_offset']
         self.offset_alpha = tuple(self.Ts / params[m + key] for key in (
             'offset_time', 'offset_load_mean', 'offset_load_time'))
@@ -196,8 +195,7 @@ class Estimator:
         self.pd_filt = 0.0          # its low-pass (model input)
         self.detector.reset()
         self.monitor_s[:] = 0.0
-        self.flow_count[:] = 0.0
-        self.flow_active = False
+        self.flow_s[:] = 0.0
         self.offset_s[:] = 0.0
         if self.noise_k is not None:
             noise_level.reset(self.noise_k, self.noise_s, self.kf.R, self.kf.R1, self.kf.Q)
@@ -308,9 +306,9 @@ class Estimator:
             if kf.i_flow >= 0:
                 rest = (kf.fs[adapt.FS_N] >= kf.fk[adapt.FK_NREST]
                         and not adapt.load_varying(self.offset_s, kf.dp_friction))
-                self.flow_active = adapt.flow_noise(
+                adapt.flow_noise(
                     kf.Q, kf.x, kf.i_flow, kf.i_gm, b_sigma, self.flow_k, self.q_flow, rest,
-                    self.flow_count, self.flow_n, kf.fk, kf.dp_friction, self.flow_share,
+                    self.flow_s, self.flow_n, kf.fk, kf.dp_friction, self.flow_share,
                     self.flow_report)
         self._monitor(position)
         if self.chinniah is not None and pr_ok:
@@ -329,6 +327,12 @@ class Estimator:
                                  self.monitor_s, self.kf.edge, self.q_x, self.q_x_disagree,
                                  self.offset_open, self.q_x_offset)
         return v
+
+    @property
+    def flow_active(self) -> bool:
+        """|v_f| was above flow_report at the last update (adapt.flow_noise): an unmodelled
+        flow, reported as model_mismatch."""
+        return bool(self.flow_s[adapt.FL_ACTIVE])
 
     @property
     def offset_open(self) -> bool:

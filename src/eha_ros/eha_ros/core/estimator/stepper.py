@@ -123,7 +123,7 @@ def pack(est):
     k[K_QFLOW], k[K_FLOWK], k[K_FLOWN] = est.q_flow, est.flow_k, est.flow_n
     k[K_FLOWDP] = kf.dp_friction if est.chambers else 0.0
     k[K_FLOWSH], k[K_FLOWREP] = est.flow_share, est.flow_report
-    e[E_FLOWN:E_FLOWN + adapt.NFLOW] = est.flow_count
+    e[E_FLOWN:E_FLOWN + adapt.NFLOW] = est.flow_s
     k[K_OFFG], k[K_QXO] = est.offset_gate, est.q_x_offset
     k[K_OFFA:K_OFFA + 3] = est.offset_alpha
     e[E_OFFS:E_OFFS + adapt.NOFS] = est.offset_s
@@ -181,7 +181,7 @@ def unpack(est, e) -> None:
     d.y_prev, d.stepped = float(e[E_YPREV]), bool(e[E_STEPPED] > 0.5)
     est.monitor_s[:] = e[E_MON:E_MON + adapt.NMS]
     est.noise_s[:] = e[E_NL:E_NL + noise_level.NNS]
-    est.flow_count[:] = e[E_FLOWN:E_FLOWN + adapt.NFLOW]
+    est.flow_s[:] = e[E_FLOWN:E_FLOWN + adapt.NFLOW]
     est.offset_s[:] = e[E_OFFS:E_OFFS + adapt.NOFS]
     if est.chambers:
         kf = est.kf
@@ -369,7 +369,6 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
                                   e[E_CLIPPED:E_CLIPPED + 1], adapt.EDGE_TICKS)
     e[E_UPDATES] += 1
     detect(k, e, position, innov, s00, pz)
-    flow = False
     if k[K_CHAMBERS] > 0.5:
         adapt.maneuver(Q, int(k[K_ILOAD]), pz, k[K_LOADZ],
                        k[K_QLOAD] + e[E_FS + adapt.FS_Q], k[K_QLOADJ])
@@ -379,10 +378,11 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
                            k[K_OFFA + 2], k[K_OFFG], k[K_FLOWDP])
         rest = (k[K_STRIBECK] > 0.5 and e[E_FS + adapt.FS_N] >= k[K_FK + adapt.FK_NREST]
                 and not adapt.load_varying(of, k[K_FLOWDP]))
-        flow = adapt.flow_noise(
+        adapt.flow_noise(
             Q, x, int(k[K_IFLOW]), int(k[K_IGM]), b_sigma, k[K_FLOWK], k[K_QFLOW], rest,
             e[E_FLOWN:E_FLOWN + adapt.NFLOW], k[K_FLOWN], k[K_FK:K_FK + adapt.NFK],
             k[K_FLOWDP], k[K_FLOWSH], k[K_FLOWREP])
+    flow = e[E_FLOWN + adapt.FL_ACTIVE] > 0.5
     offset = e[E_OFFS + adapt.OF_OPEN] > 0.5
     adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
                   int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT or flow or offset,
