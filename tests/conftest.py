@@ -31,6 +31,6 @@ def ros_node(rclpy_session):
 @pytest.fixture(scope='module')
 def params():
     """Estimator parameters as the estimator node loads them (plant.yaml + estimator.yaml)."""
-    from eha_ros.core.batch import node_params
+    from eha_ros.core.sim.batch import node_params
     from eha_ros.core.estimator.params import SCHEMA
     return node_params('estimator', SCHEMA)

@@ -1,14 +1,14 @@
-"""The fast batch closed loop (core.batch.BatchLoop with core.closed_loop segments) reproduces
-the tick-by-tick reference path bit for bit: plant, estimator, controller and switch manager,
-over a load step, a commanded switch, faults (motor_fail, timed sensor faults, rejected
+"""The fast batch closed loop (core.sim.batch.BatchLoop with core.sim.closed_loop segments)
+reproduces the tick-by-tick reference path bit for bit: plant, estimator, controller and switch
+manager, over a load step, a commanded switch, faults (motor_fail, timed sensor faults, rejected
 pressures) and BatchStack's loop without the manager."""
 import math
 
 import numpy as np
 import pytest
 
-from eha_ros.core.batch import BatchStack
-from eha_ros.core.redundancy import batch as B
+from eha_ros.core.sim.batch import BatchStack
+from eha_ros.core.sim import switchover as B
 
 T_SWITCH = 1.5
 T_FAIL = 2.5
@@ -51,7 +51,7 @@ def test_table_3_4_bit_identical(table_3_4):
 def test_timed_sensor_faults_and_rejections_bit_identical():
     """Fault expiry (msp_noise, msp_drift, stuck pressures), rejected pressures (Python ticks
     inside a run), a refused command and commands in a row; the 2 mm drift is a position
-    fault: the safe state (core.safe_state), found by a compiled tick that is rolled back and
+    fault: the safe state (core.loop.safe_state), found by a compiled tick that is rolled back and
     done again in Python."""
     scn = B.Scenario(duration=2.4, faults=[(0.5, 'msp_noise', 0, 5e-5, 0.7),
                                            (1.0, 'msp_drift', 0, 2e-3, 0.8),

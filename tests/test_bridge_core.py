@@ -6,14 +6,14 @@ import math
 import pytest
 import yaml
 
-from eha_ros.core.batch import node_params
+from eha_ros.core.sim.batch import node_params
 from eha_ros.core.bridge.link import AdsLink, LinkError, SymbolError
 from eha_ros.core.bridge.peer import AdsPeer
 from eha_ros.core.hardware.gate import CommandGate
 from eha_ros.core.hardware.staleness import Staleness
 from eha_ros.core.bridge.symbols import ROLES, load_symbol_map
-from eha_ros.core.params import ParamError, default_config_dir
-from eha_ros.core.plant_sim_params import SCHEMA as SIM
+from eha_ros.core.config.params import ParamError, default_config_dir
+from eha_ros.core.plant.node_params import SCHEMA as SIM
 from ros_util import free_port
 
 MAP = f'{default_config_dir()}/ads_symbols.yaml'

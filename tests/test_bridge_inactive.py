@@ -14,6 +14,7 @@ import threading
 import numpy as np
 import pytest
 
+from probes import DiagnosticsCollector
 from ros_util import ROOT, start_process, stop_process, wait_for, wait_matched
 from test_bridge_core import free_port
 
@@ -21,25 +22,18 @@ pytestmark = pytest.mark.ros
 
 
 def test_reference_before_arming_moves_nothing_then_arm_and_step(ros_node, tmp_path):
-    from diagnostic_msgs.msg import DiagnosticArray
     from eha_msgs.msg import ActuatorCommand, ActuatorState, PositionReference
     from rclpy.qos import QoSProfile
     from std_srvs.srv import SetBool
-    states, commands, diags = [], [], {}
+    states, commands = [], []
 
-    bridge = {}
-
-    def on_diag(msg):
-        for st in msg.status:
-            if st.name.startswith('controller'):
-                diags.update({kv.key: kv.value for kv in st.values})
-            elif st.name.startswith('hardware_bridge'):
-                bridge.update({kv.key: kv.value for kv in st.values}, message=st.message)
+    diagnostics = DiagnosticsCollector(ros_node)
+    diags = diagnostics.view('controller', prefix=True, merged=True)
+    bridge = diagnostics.view('hardware_bridge', prefix=True, merged=True, fields=True)
     ros_node.create_subscription(ActuatorState, '/eha/state', states.append,
                                  QoSProfile(depth=1000))
     ros_node.create_subscription(ActuatorCommand, '/eha/command', commands.append,
                                  QoSProfile(depth=1000))
-    ros_node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 50)
     ref = ros_node.create_publisher(PositionReference, '/eha/reference', 10)
     from eha_ros.nodes.common import latched_qos
     from lifecycle_msgs.msg import State

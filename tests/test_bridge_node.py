@@ -10,11 +10,12 @@ import time
 import numpy as np
 import pytest
 
-from eha_ros.core.batch import node_params
+from eha_ros.core.sim.batch import node_params
 from eha_ros.core.bridge.peer import AdsPeer
 from eha_ros.core.bridge.symbols import load_symbol_map
-from eha_ros.core.plant_sim_params import SCHEMA as SIM
+from eha_ros.core.plant.node_params import SCHEMA as SIM
 from eha_ros.stack import node_command
+import probes
 from ros_util import start_process, stop_process, wait_for, wait_matched
 from test_bridge_core import MAP, free_port, write_map
 
@@ -86,39 +87,28 @@ def bridge(peer):
     assert 'Traceback' not in err, err
 
 
-class Probe:
+class Probe(probes.Probe):
+    LOOP = 'hardware_bridge: loop'
+
     def __init__(self, node):
-        from diagnostic_msgs.msg import DiagnosticArray
         from eha_msgs.msg import ActuatorCommand, ActuatorState, ChannelSelect
-        from rclpy.qos import QoSProfile
         from std_srvs.srv import SetBool, Trigger
         from eha_ros.nodes.common import latched_qos
-        self.node = node
-        self.states, self.diags = [], []
-        node.create_subscription(ActuatorState, '/eha/state', self.states.append,
-                                 QoSProfile(depth=1000))
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 50)
+        super().__init__(node)
+        self.states = self.received(ActuatorState, '/eha/state', 1000)
         self.cmd_pub = node.create_publisher(ActuatorCommand, '/eha/command', 100)
         self.sel_pub = node.create_publisher(ChannelSelect, '/eha/channel_select', latched_qos())
-        self.arm_cli = node.create_client(SetBool, '/eha/bridge/arm')
-        self.reset_cli = node.create_client(Trigger, '/eha/bridge/reset')
+        self.arm_cli = self.client(SetBool, '/eha/bridge/arm')
+        self.reset_cli = self.client(Trigger, '/eha/bridge/reset')
         self.Cmd, self.Sel, self.SetBool, self.Trigger = ActuatorCommand, ChannelSelect, SetBool, \
             Trigger
         self.last_cmd_time = None
 
-    def _diag(self, msg):
-        for st in msg.status:
-            if st.name == 'hardware_bridge: loop':
-                d = {kv.key: kv.value for kv in st.values}
-                d['_level'], d['_message'] = st.level[0], st.message
-                self.diags.append(d)
-
     def diag(self):
-        return self.diags[-1] if self.diags else {}
+        return self.diagnostics.fields(self.LOOP)
 
     def wait_diag(self, pred, timeout=20):
-        n = len(self.diags)
-        return wait_for(lambda: len(self.diags) > n and pred(self.diags[-1]), timeout)
+        return self.diagnostics.wait(self.LOOP, lambda s: pred(s.fields()), timeout, new=True)
 
     def hold(self, speed, seconds):
         """Commands every ~2 ms (answering the latest state), like a controller."""
@@ -131,17 +121,11 @@ class Probe:
             self.cmd_times.append(self.last_cmd_time)
             time.sleep(0.002)
 
-    def call(self, client, req):
-        assert client.wait_for_service(timeout_sec=20)
-        fut = client.call_async(req)
-        assert wait_for(fut.done, 20)
-        return fut.result()
-
     def arm(self, on=True):
-        return self.call(self.arm_cli, self.SetBool.Request(data=on))
+        return self.call(self.arm_cli, self.SetBool.Request(data=on), 20, 20)
 
     def reset(self):
-        return self.call(self.reset_cli, self.Trigger.Request())
+        return self.call(self.reset_cli, self.Trigger.Request(), 20, 20)
 
 
 @pytest.fixture

@@ -9,7 +9,7 @@ import threading
 import numpy as np
 import pytest
 
-from eha_ros.core import recording
+from eha_ros.core.io import recording
 from eha_ros.stack import Stack, node_command
 from ros_util import ROOT, start_process, stop_process, wait_for
 from test_bridge_core import free_port

@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from eha_ros.core.cli import UsageError
+from eha_ros.core.config.cli import UsageError
 from eha_ros.core.sim import campaign as C
 from eha_ros.core.sim import family as F
 from eha_ros.core.sim import scenarios as SC
@@ -324,3 +324,32 @@ def test_cli_malformed_family_file(tmp_path):
     r = cli('step', '--family', str(bad), '--out', str(out), timeout=120)
     assert r.returncode == 2 and 'family file' in r.stderr and 'Traceback' not in r.stderr
     assert not out.exists()
+
+
+def _campaign_folder(path, steady, trace):
+    os.makedirs(path)
+    pd.DataFrame({'run_id': [2, 0, 1], 'C_eq': [1.0, 0.1, 10.0],
+                  'steady_error_m': steady, 'passed': [True, True, False],
+                  'wall_s': np.random.rand(3)}).to_parquet(os.path.join(path, 'results.parquet'))
+    np.savez(os.path.join(path, 'traces.npz'), x=np.array(trace), t=np.arange(3.0))
+    return str(path)
+
+
+def test_compare_two_campaigns_run_by_run(tmp_path):
+    """scripts/campaign --compare: identical folders (row order and wall time aside) exit 0;
+    a moved figure is named with its runs and largest difference, exit 1; not a campaign
+    folder: one line, exit 2."""
+    a = _campaign_folder(tmp_path / 'a', [1e-6, float('nan'), 3e-6], [0.0, 1.0, 2.0])
+    b = _campaign_folder(tmp_path / 'b', [1e-6, float('nan'), 3e-6], [0.0, 1.0, 2.0])
+    c = _campaign_folder(tmp_path / 'c', [1e-6, float('nan'), 5e-6], [0.0, 1.0, 2.5])
+    cli = [sys.executable, '-m', 'eha_ros.tools.campaign', '--compare']
+    same = subprocess.run(cli + [a, b], capture_output=True, text=True, timeout=120)
+    assert same.returncode == 0, same.stderr
+    assert same.stdout.startswith('identical: 3 runs, 4 columns, 2 trace arrays'), same.stdout
+    moved = subprocess.run(cli + [a, c], capture_output=True, text=True, timeout=120)
+    assert moved.returncode == 1, moved.stderr
+    assert 'steady_error_m: 1 of 3 runs differ, largest |a - b| 2e-06' in moved.stdout, moved.stdout
+    assert 'traces: x' in moved.stdout
+    bad = subprocess.run(cli + [a, str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and 'no results.parquet' in bad.stderr and \
+        len(bad.stderr.strip().splitlines()) == 1, bad.stderr

@@ -1,4 +1,4 @@
-"""core.cdr: the live view's CDR encoder writes what serialize_message writes, field for field,
+"""core.io.cdr: the live view's CDR encoder writes what serialize_message writes, field for field,
 for every eha_msgs type and values across their ranges; padding zeroed; unsupported layouts
 refused so the caller falls back."""
 import re
@@ -7,7 +7,7 @@ import struct
 import numpy as np
 import pytest
 
-from eha_ros.core import cdr
+from eha_ros.core.io import cdr
 
 TYPES = ['ActuatorCommand', 'ActuatorState', 'ChannelSelect', 'ExternalLoad', 'PlantTruth',
          'PositionEstimate', 'PositionReference', 'RedundancyStatus']

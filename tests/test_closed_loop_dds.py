@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from eha_ros.stack import Stack
+import probes
 from ros_util import wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
@@ -27,25 +28,19 @@ def stack():
 
 
 
-class Bench:
+class Bench(probes.Probe):
     def __init__(self, node):
         from eha_msgs.msg import ExternalLoad, PlantTruth, PositionReference
-        from diagnostic_msgs.msg import DiagnosticArray
-        self.truth = {}
-        self.diags = []
-        node.create_subscription(PlantTruth, '/eha/sim/truth', self._truth, 1000)
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 10)
+        super().__init__(node, diagnostics=10)
+        self.truth = self.by_seq(PlantTruth, '/eha/sim/truth', 1000,
+                                 lambda m: (m.position, m.pressure_a - m.pressure_b))
         self.ref = node.create_publisher(PositionReference, '/eha/reference', 10)
         self.load = node.create_publisher(ExternalLoad, '/eha/sim/load_force', 10)
         self.Ref, self.Load = PositionReference, ExternalLoad
 
-    def _truth(self, m):
-        self.truth[m.seq] = (m.position, m.pressure_a - m.pressure_b)
-
-    def _diag(self, msg):
-        for st in msg.status:
-            if st.name.startswith('plant_sim'):
-                self.diags.append({kv.key: kv.value for kv in st.values})
+    @property
+    def diags(self):
+        return [s.values for s in self.diagnostics.all('plant_sim', prefix=True)]
 
     @property
     def seq(self):
@@ -53,7 +48,7 @@ class Bench:
 
     def wait_ticks(self, n, timeout=60):
         target = self.seq + n
-        assert wait_for(lambda: self.seq >= target, timeout), 'plant stalled'
+        self.wait(lambda: self.seq >= target, timeout, 'plant stalled')
 
     def positions(self, k0, k1):
         return np.array([self.truth[k][0] for k in range(k0, k1) if k in self.truth])

@@ -158,7 +158,7 @@ def test_bumpless_restart_and_hold():
 
 def test_jumped_reference_moves_with_bounded_acceleration_and_sines_pass_unchanged():
     from eha_ros.core.controller.reference import ReferenceShaper
-    from eha_ros.core.stats import Counters
+    from eha_ros.core.loop.stats import Counters
     sh = ReferenceShaper(0.12, 0.005, 0.19, TS, Counters(), accel_limit=10.0)
     sh.start_from(0.0)
     sh.request(0.005)
@@ -183,7 +183,7 @@ def test_5mm_step_on_the_nonlinear_plant_overshoot_settling():
     acceleration limit the 190 mm/s ramp alone drives the speed clamp; the observer-form
     anti-windup keeps that step within the spec too (0.14 %; conditional integration of the
     earlier controller: about 11 %)."""
-    from eha_ros.core.batch import BatchStack
+    from eha_ros.core.sim.batch import BatchStack
     res = {}
     for acc in (10.0, 0.0):
         st = BatchStack(overrides={'controller': {'controller:control.accel_limit': acc}})
@@ -226,3 +226,45 @@ def test_reference_acceleration_within_the_weakest_drive_of_the_family():
     assert acc <= 0.85 * a_max
     assert figs[acc]['overshoot_pct'] <= 5.0 and figs[acc]['settling_s'] <= 0.3
     assert figs[10.0]['overshoot_pct'] <= 5.0
+
+
+def test_drive_mismatch_of_the_velocity_loop():
+    """The controller node warns when its G_v (velocity_controller) is not the drive of
+    plant.yaml (eq. 4.71): the shipped pair matches, a changed gain is measured, another order
+    is inf."""
+    from eha_ros.core.controller.params import SCHEMA
+    from eha_ros.core.controller.velocity_loop import drive_mismatch
+    from eha_ros.core.sim.batch import node_params
+    p = node_params('controller', SCHEMA)
+    print(f'shipped: {drive_mismatch(p):.2e}')
+    assert drive_mismatch(p) <= p['control.drive_check_tolerance']
+    q = dict(p, **{'plant.drive.Kp_w': 1.2 * p['plant.drive.Kp_w']})
+    # the YAML's G_v against a drive with 20 % more Kp_w: |1 - 1.2| / 1.2 = 1/6
+    assert drive_mismatch(q) == pytest.approx(1 / 6, rel=1e-9)
+    r = dict(p, **{'velocity_controller.den': [1.0, 5.0]})
+    assert drive_mismatch(r) == float('inf')
+
+
+def test_tick_sync_pairs_references_with_their_estimates():
+    """The controller node's lock-step pairing (core.controller.tick_sync): a tick-locked
+    reference k waits for estimate k; in lock-step an estimate beyond the newest reference
+    waits for it, at most 50 ms (counted)."""
+    from types import SimpleNamespace as E
+    from eha_ros.core.controller.tick_sync import TickSync
+    s = TickSync(lockstep=True, wait=0.05)
+    assert s.reference(0, 1e-3, last_seq=10)            # untimed: at once
+    assert not s.reference(12, 2e-3, last_seq=10)       # tick 12: queued
+    assert not s.reference(13, 3e-3, last_seq=10)
+    assert s.reference(9, 4e-3, last_seq=10)            # its tick is past: at once
+    assert s.due(11) == [] and s.due(12) == [2e-3] and s.due(20) == [3e-3]
+    assert not s.hold(E(seq=13), now=0.0)               # its reference (13) came
+    assert s.hold(E(seq=14), now=0.0) and s.hold(E(seq=15), now=0.01)
+    assert s.pop_ready(0.02) is None                    # waiting, within 50 ms
+    assert not s.reference(14, 5e-3, last_seq=13)
+    assert s.pop_ready(0.02).seq == 14 and s.pop_ready(0.02) is None
+    assert s.pop_ready(0.07).seq == 15                  # waited 60 ms: released, counted
+    assert s.c.get('reference_wait_timeouts', 0) == 1
+    assert s.hold(E(seq=16), now=1.0) and s.pop_ready(1.0, force=True).seq == 16
+    assert s.c.get('reference_wait_timeouts', 0) == 1   # forced: not a timeout
+    real_time = TickSync(lockstep=False)
+    assert not real_time.hold(E(seq=99), now=0.0)       # only lock-step waits

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from eha_ros.stack import node_command
+import probes
 from ros_util import start_process, stop_process, wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
@@ -17,27 +18,24 @@ def controller_cmd(*extra, files=None):
     return node_command('controller', extra=extra, files=files)
 
 
-class FakeEstimator:
+class FakeEstimator(probes.Probe):
     """Publishes estimates at ~1 kHz from a thread; records the commands that answer them."""
 
     def __init__(self, node):
         from eha_msgs.msg import ActuatorCommand, PositionEstimate, PositionReference
-        from diagnostic_msgs.msg import DiagnosticArray
+        super().__init__(node, diagnostics=10)
         self.Est, self.Ref = PositionEstimate, PositionReference
         self.pub = node.create_publisher(PositionEstimate, '/eha/estimate', 10)
         self.ref_pub = node.create_publisher(PositionReference, '/eha/reference', 10)
-        self.commands, self.diags = [], []
-        node.create_subscription(ActuatorCommand, '/eha/command', self.commands.append, 1000)
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 10)
+        self.commands = self.received(ActuatorCommand, '/eha/command', 1000)
         self.seq, self.position, self.stale, self.running = 0, 0.0, False, True
         self.paused = False
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
 
-    def _diag(self, msg):
-        for st in msg.status:
-            if st.name.startswith('controller'):
-                self.diags.append({kv.key: kv.value for kv in st.values})
+    @property
+    def diags(self):
+        return [s.values for s in self.diagnostics.all('controller', prefix=True)]
 
     def _run(self):
         while self.running:
@@ -142,11 +140,7 @@ def test_managed_controller_change_state_inactive_active_bumpless(ros_node):
     change = ros_node.create_client(ChangeState, '/controller/change_state')
     get = ros_node.create_client(GetState, '/controller/get_state')
 
-    def call(client, req):
-        assert client.wait_for_service(timeout_sec=30), client.srv_name
-        fut = client.call_async(req)
-        assert wait_for(fut.done, 20), client.srv_name
-        return fut.result()
+    call = est.call
 
     def transition(label):
         req = ChangeState.Request()

@@ -8,7 +8,7 @@ import re
 
 import pytest
 
-from eha_ros.core.schemas import node_names, schema_for
+from eha_ros.core.config.registry import node_names, schema_for
 from eha_ros.tools import param_docs
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from eha_ros.stack import Stack
+import probes
 from ros_util import wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
@@ -20,33 +21,26 @@ def loop():
         assert code == 0 and 'Traceback' not in err, (name, code, err[-2000:])
 
 
-class Listener:
+class Listener(probes.Probe):
     def __init__(self, node):
         from eha_msgs.msg import ActuatorCommand, ActuatorState, PlantTruth, PositionEstimate
         from eha_msgs.msg import PositionReference, RedundancyStatus
-        from diagnostic_msgs.msg import DiagnosticArray
-        self.state, self.estimate, self.command, self.truth = {}, {}, {}, {}
-        self.redundancy, self.diags = [], {}
-        node.create_subscription(ActuatorState, '/eha/state',
-                                 lambda m: self.state.__setitem__(m.seq, m.position), 1000)
-        node.create_subscription(PositionEstimate, '/eha/estimate',
-                                 lambda m: self.estimate.__setitem__(m.seq, m.position), 1000)
-        node.create_subscription(ActuatorCommand, '/eha/command',
-                                 lambda m: self.command.__setitem__(m.seq, m.motor_speed_ref),
-                                 1000)
-        node.create_subscription(PlantTruth, '/eha/sim/truth',
-                                 lambda m: self.truth.__setitem__(m.seq, m.position), 1000)
+        from eha_ros.monitor import parse_value
         from eha_ros.nodes.common import latched_qos
-        node.create_subscription(RedundancyStatus, '/eha/redundancy',
-                                 lambda m: self.redundancy.append(m), latched_qos())
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 50)
+        super().__init__(node, parse=parse_value)
+        self.state = self.by_seq(ActuatorState, '/eha/state', 1000, lambda m: m.position)
+        self.estimate = self.by_seq(PositionEstimate, '/eha/estimate', 1000, lambda m: m.position)
+        self.command = self.by_seq(ActuatorCommand, '/eha/command', 1000,
+                                   lambda m: m.motor_speed_ref)
+        self.truth = self.by_seq(PlantTruth, '/eha/sim/truth', 1000, lambda m: m.position)
+        self.redundancy = self.received(RedundancyStatus, '/eha/redundancy', latched_qos())
         self.ref = node.create_publisher(PositionReference, '/eha/reference', 10)
         self.Ref = PositionReference
 
-    def _diag(self, msg):
-        from eha_ros.monitor import parse_value
-        for s in msg.status:
-            self.diags[s.name] = {v.key: parse_value(v.value) for v in s.values}
+    @property
+    def diags(self):
+        """name -> the newest values of that status."""
+        return {n: s.values for n, s in self.diagnostics.latest_by_name().items()}
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@ import os
 import numpy as np
 import pytest
 
-from eha_ros.core.params import ParamError, load
+from eha_ros.core.config.params import ParamError, load
 from eha_ros.core.estimator import batch, kernels
 from eha_ros.core.estimator.chinniah import (ALPHA_TABLE_4_1, Chinniah3, ChinniahEstimator,
                                              ChinniahJoint, simulate_rig)
@@ -61,13 +61,13 @@ def test_friction_estimate_eq_4_36_opposes_motion_and_is_continuous(params):
     pp = PlantParams.from_dict(params)
     args = (pp.A_p, pp.D_p, 800.0, 3e-3)
     w_fast = 5e-3 * pp.A_p / pp.D_p * 10            # pump flow well above v_eps
-    assert friction_estimate(w_fast, 1e6, *args) == -800.0          # min(|p_D A_p|, F_s)
-    assert friction_estimate(-w_fast, -1e6, *args) == 800.0
-    assert friction_estimate(w_fast, 1e5, *args) == pytest.approx(-1e5 * pp.A_p)
-    assert friction_estimate(w_fast, None, *args) == -800.0
-    assert friction_estimate(0.0, 2e5, *args) == pytest.approx(-2e5 * pp.A_p)  # sticking
+    assert friction_estimate(w_fast, 1e6, True, *args) == -800.0          # min(|p_D A_p|, F_s)
+    assert friction_estimate(-w_fast, -1e6, True, *args) == 800.0
+    assert friction_estimate(w_fast, 1e5, True, *args) == pytest.approx(-1e5 * pp.A_p)
+    assert friction_estimate(w_fast, 0.0, False, *args) == -800.0
+    assert friction_estimate(0.0, 2e5, True, *args) == pytest.approx(-2e5 * pp.A_p)  # sticking
     ws = np.linspace(-2 * w_fast / 10, 2 * w_fast / 10, 2001)
-    fl = np.array([friction_estimate(w, 2e5, *args) for w in ws])
+    fl = np.array([friction_estimate(w, 2e5, True, *args) for w in ws])
     assert np.max(np.abs(np.diff(fl))) < 10.0, 'friction estimate jumps'
 
 
@@ -348,7 +348,7 @@ def test_chinniah_3state_alone_finds_coulomb_friction():
 
 # ---------------------------------------------------------------- parameters
 def test_estimator_schema_registered_and_defaults_match_yaml(params):
-    from eha_ros.core.schemas import schema_for
+    from eha_ros.core.config.registry import schema_for
     assert schema_for('estimator') is SCHEMA
     assert load(SCHEMA, [CONFIG[0]]) == params     # YAML repeats the schema defaults
 
@@ -392,7 +392,7 @@ def _open_loop_model_error(params, structure):
     """Max |x_model - x| over 2 s of a 1 Hz 5 mm sine on the noise-free nonlinear plant: the
     filter's model alone (no update), started on the true state at t = 1 s, driven by the
     true motor speed (mean over the tick) and the true friction force."""
-    from eha_ros.core.pid import PID
+    from eha_ros.core.controller.pid import PID
     from eha_ros.core.plant import EhaPlant
     p = dict(params)
     p.update({'plant.sensors.noise': False, 'estimator.model.structure': structure,

@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+import probes
 from ros_util import ROOT, VENV_BIN, start_process, stop_process, wait_for
 
 pytestmark = pytest.mark.ros
@@ -25,33 +26,21 @@ def cmd(name, files, *extra):
     return args + list(extra)
 
 
-class Probe:
+class Probe(probes.Probe):
     def __init__(self, node, ns=''):
-        from diagnostic_msgs.msg import DiagnosticArray
         from eha_msgs.msg import ActuatorState, PositionEstimate
         from rclpy.qos import QoSProfile
         qos = QoSProfile(depth=2000)
-        self.lock = threading.Lock()
-        self.states, self.estimates, self.diags = {}, [], []
-        node.create_subscription(ActuatorState, f'{ns}/eha/state', self._on_state, qos)
-        node.create_subscription(PositionEstimate, f'{ns}/eha/estimate', self._on_est, qos)
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
+        super().__init__(node)
+        self.states = self.by_seq(ActuatorState, f'{ns}/eha/state', qos)
+        self.estimates = self.received(PositionEstimate, f'{ns}/eha/estimate', qos, stamped=True)
         self.ns = ns or '/'
         self.state_pub = node.create_publisher(ActuatorState, f'{ns}/eha/state', qos)
         self.State = ActuatorState
 
-    def _on_state(self, msg):
-        with self.lock:
-            self.states[msg.seq] = msg
-
-    def _on_est(self, msg):
-        with self.lock:
-            self.estimates.append((time.monotonic(), msg))
-
-    def _on_diag(self, msg):
-        for st in msg.status:
-            if st.name == f'estimator: filter {self.ns}':
-                self.diags.append({kv.key: kv.value for kv in st.values})
+    @property
+    def diags(self):
+        return [s.values for s in self.diagnostics.all(f'estimator: filter {self.ns}')]
 
     def clear(self):
         with self.lock:

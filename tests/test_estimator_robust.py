@@ -5,20 +5,20 @@ with the leakage Jacobian, estimate projection, gated adaptation, load-step proc
 the consistency monitor (sensor fault vs model mismatch vs filter/sensor disagreement) and the
 tuning derived from the family (core.estimator.tuning, scripts/tune_estimator). Closed loop:
 nonlinear plant varied through plant_sim overrides, estimator and controller nominal
-(core.batch.BatchStack, compiled path)."""
+(core.sim.batch.BatchStack, compiled path)."""
 import os
 
 import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from eha_ros.core.batch import BatchLoop, BatchStack, node_params
-from eha_ros.core.closed_loop import R_FAULT, R_U, R_X, R_XHAT, R_XM
+from eha_ros.core.sim.batch import BatchLoop, BatchStack, node_params
+from eha_ros.core.sim.closed_loop import R_FAULT, R_U, R_X, R_XHAT, R_XM
 from eha_ros.core.estimator import adapt, tuning
 from eha_ros.core.estimator import fault_detector as fd
 from eha_ros.core.estimator.chamber_kf import ChamberKF, continuous, leak_sensitivity
 from eha_ros.core.estimator.estimator import Estimator
-from eha_ros.core.plant_sim_params import SCHEMA as SIM
+from eha_ros.core.plant.node_params import SCHEMA as SIM
 from eha_ros.core.qft.family import scaled_params
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -257,7 +257,7 @@ def test_sensor_drift_under_load_is_reported_then_an_alarm_when_the_load_goes(sc
     it and the piston follows the sensor. It is never silent (adapt.flow_noise): reported as
     model_mismatch within 0.5 s; once the load goes (no pressure difference, so no leak) the
     drift is filter/sensor disagreement. The compiled path, its verdict read every 10 ms."""
-    from eha_ros.core.redundancy.batch import schedule
+    from eha_ros.core.sim.switchover import schedule
     Ts, n = 1e-3, 5000
     t = np.arange(n) * Ts
     faults = schedule([(2.0, ('msp_drift', 0, 1e-3, 0.0))], n, Ts)
@@ -335,7 +335,7 @@ def test_sensor_fault_detected_isolated_and_told_from_mismatch(scale, fault, cod
     """1 mm bias / stuck sensor at 2 s during the 1 Hz 5 mm sine: reported within 50 ms as
     a sensor fault; the estimator isolates the sensor (predict-only on the adapted model), so
     the piston does not follow the faulty reading, and the controller goes to the safe state
-    (core.safe_state: zero speed; no switch manager here, so no valve lock)."""
+    (core.loop.safe_state: zero speed; no switch manager here, so no valve lock)."""
     s = stack(scale, seed=3, faults={2000: [fault]})
     n = 2300
     t = np.arange(n) * 1e-3

@@ -11,45 +11,35 @@ import time
 import numpy as np
 import pytest
 
-from eha_ros.core.batch import node_params
+from eha_ros.core.sim.batch import node_params
 from eha_ros.core.bridge.peer import AdsPeer
 from eha_ros.core.bridge.symbols import load_symbol_map
-from eha_ros.core.plant_sim_params import SCHEMA as SIM
+from eha_ros.core.plant.node_params import SCHEMA as SIM
+import probes
 from ros_util import ROOT, start_process, stop_process, wait_for, wait_matched
 from test_bridge_core import MAP, free_port
 
 pytestmark = pytest.mark.ros
 
 
-class Client:
+class Client(probes.Probe):
     """An operator's rclpy client: lifecycle services, reference, states, diagnostics."""
 
     def __init__(self, node, plant='hardware_bridge'):
-        from diagnostic_msgs.msg import DiagnosticArray
         from eha_msgs.msg import ActuatorState, PositionReference
         from lifecycle_msgs.srv import ChangeState, GetState
-        from rclpy.qos import QoSProfile
-        self.node, self.plant = node, plant
-        self.states, self.loop = [], {}
-        node.create_subscription(ActuatorState, '/eha/state', self.states.append,
-                                 QoSProfile(depth=1000))
-        node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diag, 50)
+        super().__init__(node)
+        self.plant = plant
+        self.states = self.received(ActuatorState, '/eha/state', 1000)
         self.ref = node.create_publisher(PositionReference, '/eha/reference', 10)
         self.Ref, self.ChangeState, self.GetState = PositionReference, ChangeState, GetState
-        self.change = node.create_client(ChangeState, f'/{plant}/change_state')
-        self.get = node.create_client(GetState, f'/{plant}/get_state')
+        self.change = self.client(ChangeState, f'/{plant}/change_state')
+        self.get = self.client(GetState, f'/{plant}/get_state')
 
-    def on_diag(self, msg):
-        for st in msg.status:
-            if st.name == f'{self.plant}: loop':
-                self.loop = dict({kv.key: kv.value for kv in st.values}, _message=st.message,
-                                 _level=st.level[0])
-
-    def call(self, client, req):
-        assert client.wait_for_service(timeout_sec=30), client.srv_name
-        fut = client.call_async(req)
-        assert wait_for(fut.done, 20), client.srv_name
-        return fut.result()
+    @property
+    def loop(self) -> dict:
+        """The plant's newest 'loop' status: values, _message, _level ({} before the first)."""
+        return self.diagnostics.fields(f'{self.plant}: loop')
 
     def state(self) -> str:
         return self.call(self.get, self.GetState.Request()).current_state.label
@@ -65,7 +55,7 @@ class Client:
     def reference(self, x: float, seconds: float):
         self.ref.publish(self.Ref(position=float(x)))
         seq = self.states[-1].seq
-        assert wait_for(lambda: self.states[-1].seq > seq + 1000 * seconds, 30 + 5 * seconds)
+        self.wait(lambda: self.states[-1].seq > seq + 1000 * seconds, 30 + 5 * seconds)
 
 
 def run_stack(tmp_path, *args):

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from eha_ros.core.ws_subprotocol import CURRENT, LEGACY, rename_request, rename_response
+from eha_ros.core.io.ws_subprotocol import CURRENT, LEGACY, rename_request, rename_response
 from ros_util import free_port, wait_for
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
@@ -45,7 +45,7 @@ def test_relay_renames_the_handshake_and_copies_every_byte_in_order():
     it with foxglove.sdk.v1, the answer comes back with the legacy name, then 200 kB in
     irregular pieces cross each way unchanged and in order (batched copies lose nothing)."""
     import threading
-    from eha_ros.core.ws_subprotocol import SubprotocolRelay
+    from eha_ros.core.io.ws_subprotocol import SubprotocolRelay
     srv = socket.create_server(('127.0.0.1', 0))
     seen = {}
     payload = bytes(range(256)) * 800
@@ -92,8 +92,8 @@ def test_relay_renames_the_handshake_and_copies_every_byte_in_order():
 def test_eha_loop_guest_reads_only_its_own_sections():
     """live in eha_loop gets the loop's params files, whose /** sections hold the plant
     parameters: as a guest it takes only what is addressed to it by name."""
-    from eha_ros.core.live_params import SCHEMA
-    from eha_ros.core.params import ParamError, load
+    from eha_ros.core.io.live_params import SCHEMA
+    from eha_ros.core.config.params import ParamError, load
     files = ['config/plant.yaml', 'config/live.yaml']
     p = load(SCHEMA, files, {'live:live.port': 9, 'plant.sim.Ts': 1e-3}, node='live',
              wildcards=False)
@@ -130,8 +130,8 @@ def test_in_process_subscriber_counts_only_while_it_wants_messages():
 
 
 def test_decimation_entries():
-    from eha_ros.core.params import ParamError
-    from eha_ros.nodes.live import decimation
+    from eha_ros.core.config.params import ParamError
+    from eha_ros.core.io.live_params import decimation
     assert decimation(['']) == {}
     assert decimation(['/eha/sim/truth:10', '/diagnostics:2']) == {'/eha/sim/truth': 10,
                                                                    '/diagnostics': 2}
@@ -171,8 +171,9 @@ def test_live_view_agrees_with_dds_by_seq(ros_node, tmp_path, where):
     """Real-time composed stack with live inside eha_loop (run_stack --live: the loop topics
     taken in-process) or as its own process next to it (the live executable, DDS); the test
     subscribes over DDS and over the WebSocket at once: every state and estimate both
-    received are the same message, field by field (in the loop: encoded by core.cdr); the truth topic is decimated 1:10; a
-    channel switch requested from the viewer is carried out; parameters read back."""
+    received are the same message, field by field (in the loop: encoded by core.io.cdr); the
+    truth topic is decimated 1:10; a channel switch requested from the viewer is carried out;
+    parameters read back."""
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rclpy.serialization import deserialize_message
 
@@ -243,7 +244,7 @@ def test_live_view_agrees_with_dds_by_seq(ros_node, tmp_path, where):
         with pytest.raises(RuntimeError, match="no field 'bogus'"):
             client.call('/eha/inject_fault', {'bogus': 1})
         # node parameters as node:name
-        from eha_ros.core.batch import node_params
+        from eha_ros.core.sim.batch import node_params
         from eha_ros.core.controller.params import SCHEMA
         want = node_params('controller', SCHEMA)['control.rate_limit']
         assert client.get_parameters(['controller:control.rate_limit']) == \

@@ -5,7 +5,8 @@ import sys
 
 import pytest
 
-from eha_ros.core.params import Param, ParamError, Schema, load, parse_ros_args, read_params_file
+from eha_ros.core.config.params import (Param, ParamError, Schema, load, parse_ros_args,
+                                        read_params_file)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCHEMA = Schema('demo', [
@@ -49,7 +50,7 @@ def test_precedence_mirrors_rclpy(tmp_path):
 
 
 def test_section_matching_like_rcl():
-    from eha_ros.core.params import _section_class as kind
+    from eha_ros.core.config.params import _section_class as kind
     assert kind('demo', '/demo') == 'named' and kind('demo', '/eha/demo') is None
     assert kind('/eha/demo', '/eha/demo') == 'named'
     assert kind('/**', '/eha/demo') == 'wild' and kind('/**/demo', '/demo') == 'wild'
@@ -195,6 +196,65 @@ def test_check_config_and_the_node_refuse_the_same_file_with_the_same_line(tmp_p
         assert res.returncode == 2 and len(lines) == 1, (prog, res.returncode, res.stderr)
         assert lines[0].startswith(f'{prog}: error: ') and words in lines[0], lines[0]
     assert check.stderr.split(': error: ')[1] == node.stderr.split(': error: ')[1]
+
+
+def _cfg(*names):
+    return [os.path.join(ROOT, 'config', n) for n in names]
+
+
+# issue 19: every cross-key check lives in the schema, so the node and check_config refuse a
+# file with the same line (before, check_config said "ok" for F_s < F_c, the node refused)
+FRICTION = '/**:\n  ros__parameters:\n    plant:\n      friction: {F_c: 900.0, F_s: 800.0}\n'
+CROSS_KEY_CASES = {
+    'plant_sim F_s < F_c': ('plant_sim', _cfg('plant.yaml', 'plant_sim.yaml'), FRICTION,
+                            'plant.friction.F_s = 800.0: expected >= plant.friction.F_c = 900.0'),
+    'estimator F_s < F_c': ('estimator', _cfg('plant.yaml', 'estimator.yaml'), FRICTION,
+                            'plant.friction.F_s = 800.0: expected >= plant.friction.F_c'),
+    'controller F_s < F_c': ('controller', CONTROLLER_FILES, FRICTION,
+                             'plant.friction.F_s = 800.0: expected >= plant.friction.F_c'),
+    'switch_manager clear > trip': (
+        'switch_manager', _cfg('plant.yaml', 'switch_manager.yaml'),
+        'switch_manager:\n  ros__parameters:\n    switch:\n      health:\n'
+        '        speed: {trip: 50.0, clear: 80.0}\n',
+        'expected <= '),
+    'sweep above Nyquist/10': ('sweep', _cfg('plant.yaml', 'sweep.yaml'),
+                               'sweep:\n  ros__parameters:\n    sweep: {max_hz: 200.0}\n',
+                               'above Nyquist/10'),
+    'live decimation': ('live', _cfg('live.yaml'),
+                        "live:\n  ros__parameters:\n    live: {decimation: ['/eha/state:0']}\n",
+                        "live.decimation: '/eha/state:0'"),
+}
+
+
+@pytest.mark.parametrize('case', sorted(CROSS_KEY_CASES))
+def test_cross_key_checks_refused_alike_by_check_config_and_the_node(tmp_path, case):
+    node, files, text, words = CROSS_KEY_CASES[case]
+    path = write(tmp_path, text, 'bad.yaml')
+    check = subprocess.run([sys.executable, '-m', 'eha_ros.tools.check_config', '--node', node,
+                            *files, path], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([os.path.join(os.path.dirname(sys.executable), node), '--ros-args']
+                          + [a for f in files + [path] for a in ('--params-file', f)],
+                          capture_output=True, text=True, timeout=120)
+    for res, prog in ((check, 'check_config'), (proc, node)):
+        lines = res.stderr.strip().splitlines()
+        assert res.returncode == 2 and len(lines) == 1, (prog, res.returncode, res.stderr)
+        assert lines[0].startswith(f'{prog}: error: ') and words in lines[0], lines[0]
+        assert 'Traceback' not in res.stderr
+    assert check.stderr.split(': error: ')[1] == proc.stderr.split(': error: ')[1]
+    print(check.stderr.strip())
+
+
+def test_check_config_takes_overrides_with_or_without_ros_args():
+    files = _cfg('plant.yaml', 'sweep.yaml')
+    for extra in (['-p', 'sweep:sweep.max_hz:=200.0'],
+                  ['--ros-args', '-p', 'sweep:sweep.max_hz:=200.0']):
+        res = subprocess.run([sys.executable, '-m', 'eha_ros.tools.check_config', '--node',
+                              'sweep', *files, *extra], capture_output=True, text=True,
+                             timeout=120)
+        assert res.returncode == 2 and 'above Nyquist/10' in res.stderr, res.stderr
+    res = subprocess.run([sys.executable, '-m', 'eha_ros.tools.check_config', '--node', 'sweep',
+                          *files, '--bogus'], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and "unknown argument '--bogus'" in res.stderr, res.stderr
 
 
 @pytest.mark.parametrize('args, words', [

@@ -4,7 +4,7 @@ import os
 import pytest
 import yaml
 
-from eha_ros.core.params import ParamError, flatten, load
+from eha_ros.core.config.params import ParamError, flatten, load
 from eha_ros.core.plant import PLANT_SCHEMA, EhaPlant, PlantParams
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from eha_ros.stack import node_command
+import probes
 from ros_util import start_process, stop_process, wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
@@ -18,20 +19,18 @@ def plant_cmd(*extra):
     return node_command('plant_sim', extra=extra)
 
 
-class Probe:
+class Probe(probes.Probe):
     """Test-side subscriptions to the plant's outputs and publishers of its inputs."""
 
     def __init__(self, node):
         from eha_msgs.msg import (ActuatorCommand, ActuatorState, ExternalLoad, PlantTruth)
-        from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.qos import QoSProfile
         qos = QoSProfile(depth=1000)
-        self.node = node
-        self.states, self.truths, self.diags = [], [], []
+        super().__init__(node, diagnostics=10)
+        self.states = []
         self.arrivals = []
-        node.create_subscription(ActuatorState, '/eha/state', self._on_state, qos)
-        node.create_subscription(PlantTruth, '/eha/sim/truth', self.truths.append, qos)
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
+        self.subscribe(ActuatorState, '/eha/state', self._on_state, qos)
+        self.truths = self.received(PlantTruth, '/eha/sim/truth', qos)
         self.cmd_pub = node.create_publisher(ActuatorCommand, '/eha/command', 10)
         self.load_pub = node.create_publisher(ExternalLoad, '/eha/sim/load_force', 10)
         self.Cmd, self.Load = ActuatorCommand, ExternalLoad
@@ -40,10 +39,9 @@ class Probe:
         self.states.append(msg)
         self.arrivals.append(time.monotonic())
 
-    def _on_diag(self, msg):
-        for st in msg.status:
-            if st.name.startswith('plant_sim'):
-                self.diags.append({kv.key: kv.value for kv in st.values})
+    @property
+    def diags(self):
+        return [s.values for s in self.diagnostics.all('plant_sim', prefix=True)]
 
     def command(self, speed, seq=None):
         seq = self.states[-1].seq if seq is None and self.states else (seq or 0)
@@ -56,7 +54,7 @@ class Probe:
     def wait_ticks(self, n, timeout=20.0):
         """Wait until the plant has published n more ticks (plant time, not wall time)."""
         target = self.seq + n
-        assert wait_for(lambda: self.seq >= target, timeout), f'plant stalled before {target}'
+        self.wait(lambda: self.seq >= target, timeout, f'plant stalled before {target}')
 
     def hold(self, speed, seconds):
         """Command a speed every ~2 ms (as a controller would) for ``seconds`` of plant time."""
@@ -68,23 +66,19 @@ class Probe:
 
     def fault(self, name, channel=0, magnitude=0.0, duration=0.0):
         from eha_msgs.srv import InjectFault
-        client = self.node.create_client(InjectFault, '/eha/inject_fault')
-        assert client.wait_for_service(timeout_sec=20)
-        fut = client.call_async(InjectFault.Request(fault=name, channel=channel,
-                                                    magnitude=float(magnitude),
-                                                    duration=float(duration)))
-        assert wait_for(fut.done, 10)
-        return fut.result()
+        return self.service(InjectFault, '/eha/inject_fault', service_timeout=20, timeout=10,
+                            fault=name, channel=channel, magnitude=float(magnitude),
+                            duration=float(duration))
 
     def window(self, k0, k1, timeout=20.0):
         """States with k0 <= seq < k1 (plant ticks), waiting until they have arrived."""
-        assert wait_for(lambda: self.seq >= k1, timeout), f'plant stalled before {k1}'
+        self.wait(lambda: self.seq >= k1, timeout, f'plant stalled before {k1}')
         return [s for s in self.states[-(self.seq - k0) - 100:] if k0 <= s.seq < k1]
 
     def sensor_error(self, k0, k1):
         """Measured minus true position for ticks k0 <= seq < k1 (matched by seq)."""
         states = self.window(k0, k1)
-        assert wait_for(lambda: self.truths and self.truths[-1].seq >= k1 - 1, 10)
+        self.wait(lambda: self.truths and self.truths[-1].seq >= k1 - 1, 10)
         truth = {t.seq: t.position for t in self.truths[-(self.truths[-1].seq - k0) - 100:]}
         err = np.array([s.position - truth[s.seq] for s in states if s.seq in truth])
         assert err.size > 0.8 * (k1 - k0), 'states and truth do not match up'

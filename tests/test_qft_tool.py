@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from eha_ros.core.params import load
+from eha_ros.core.config.params import load
 from eha_ros.core.plant.parameters import PLANT_SCHEMA
 from eha_ros.core.qft import cost, family, report
 from eha_ros.core.qft.spec import load_spec
@@ -141,7 +141,7 @@ def test_stiff_design_keeps_steady_accuracy_with_the_friction_lowpass(tmp_path):
     target (and the command gets noisier still). With the 50 Hz default it ends within 20 um,
     like the eq. 4.74 design."""
     import shutil
-    from eha_ros.core.batch import BatchStack
+    from eha_ros.core.sim.batch import BatchStack
     eq474 = tmp_path / 'config'
     shutil.copytree(os.path.join(ROOT, 'config'), eq474)
     shutil.copy(eq474 / 'controller_eq474.yaml', eq474 / 'controller.yaml')

@@ -7,8 +7,9 @@ import time
 
 import pytest
 
-from eha_ros.core import recording
+from eha_ros.core.io import recording
 from eha_ros.stack import Stack, cpu_seconds, node_command
+from probes import DiagnosticsCollector
 from ros_util import fill, start_process, stop_process, wait_for
 
 pytestmark = pytest.mark.ros
@@ -121,15 +122,13 @@ class Watch:
     """Follows the recorder's message counts on /diagnostics (no 1 kHz subscription here)."""
 
     def __init__(self, node):
-        from diagnostic_msgs.msg import DiagnosticArray
-        self.counts = {}
-        node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diag, 10)
+        self.diagnostics = DiagnosticsCollector(node, depth=10)
 
-    def on_diag(self, msg):
-        for st in msg.status:
-            if st.name.startswith('recorder'):
-                self.counts = {kv.key[6:]: int(kv.value) for kv in st.values
-                               if kv.key.startswith('count ')}
+    @property
+    def counts(self) -> dict:
+        """Message count per topic in the recorder's newest status."""
+        return {k[6:]: int(v) for k, v in self.diagnostics.values('recorder', prefix=True).items()
+                if k.startswith('count ')}
 
     def ticks(self) -> int:
         """Messages of the least recorded compared stream (a stream can start late: the

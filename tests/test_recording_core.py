@@ -2,9 +2,9 @@
 the threaded sink (publish time = header stamp), columns by seq, one-line errors."""
 import pytest
 
-from eha_ros.core import recording
-from eha_ros.core.cli import UsageError
-from eha_ros.core.mcap_sink import McapSink, stamp_ns
+from eha_ros.core.io import recording
+from eha_ros.core.config.cli import UsageError
+from eha_ros.core.io.mcap_sink import McapSink, stamp_ns
 from ros_util import MSG_TYPES, fill
 
 msgdefs = pytest.importorskip('eha_ros.nodes.msgdefs')

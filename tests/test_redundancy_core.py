@@ -9,9 +9,9 @@ import subprocess
 import numpy as np
 import pytest
 
-from eha_ros.core.params import ParamError
+from eha_ros.core.config.params import ParamError
 from eha_ros.core.redundancy import ChannelSample, Hysteresis, Select, SwitchManager
-from eha_ros.core.redundancy import batch as B
+from eha_ros.core.sim import switchover as B
 from eha_ros.core.redundancy.events import EventLog, read_log
 from eha_ros.core.redundancy.params import check
 from eha_ros.stack import node_command

@@ -260,7 +260,7 @@ def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path):
     reader opens, losing at most the chunk being filled (256 KiB, well under a second)."""
     import time
     from mcap.reader import make_reader
-    from eha_ros.core.recording import read
+    from eha_ros.core.io.recording import read
     st = Started(tmp_path, 'rec', '--duration', '300', '--record')
     try:
         assert st.running(), st.lines
@@ -367,7 +367,7 @@ def test_second_plant_seen_after_the_start_is_refused(tmp_path, monkeypatch):
     its run folder and refuses with the same line. Our own plant alone passes."""
     from types import SimpleNamespace
 
-    from eha_ros.core.cli import UsageError
+    from eha_ros.core.config.cli import UsageError
     from eha_ros.tools import run_stack as RS
     monkeypatch.setattr(RS, 'stopping', lambda: None)     # no signal handling in pytest
 

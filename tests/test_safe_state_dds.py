@@ -1,4 +1,4 @@
-"""The safe state over DDS (core.safe_state): plant_sim, estimator, controller and
+"""The safe state over DDS (core.loop.safe_state): plant_sim, estimator, controller and
 switch_manager, each its own process in lock-step; a stuck position sensor injected on
 /eha/inject_fault while holding 0 under 5 kN. The estimate says sensor_fault, the controller
 commands zero speed from that seq on, the switch manager closes every valve (hydraulic lock),
@@ -9,6 +9,7 @@ import re
 import pytest
 
 from eha_ros.stack import Stack
+import probes
 from ros_util import wait_for
 
 pytestmark = pytest.mark.ros
@@ -17,28 +18,23 @@ NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 SENSOR = 3                      # PositionEstimate.consistency: sensor_fault
 
 
-class Watch:
+class Watch(probes.Probe):
     def __init__(self, node):
-        from diagnostic_msgs.msg import DiagnosticArray
         from eha_msgs.msg import (ActuatorCommand, ChannelSelect, ExternalLoad, PlantTruth,
                                   PositionEstimate, RedundancyStatus)
         from rclpy.qos import QoSProfile
         from eha_ros.nodes.common import latched_qos, stream_qos
+        super().__init__(node, diagnostics=100)
         big = QoSProfile(depth=5000)
-        self.estimates, self.commands, self.truth = {}, {}, {}
-        self.status, self.selects, self.diag = [], [], {}
-        node.create_subscription(PositionEstimate, '/eha/estimate',
-                                 lambda m: self.estimates.__setitem__(m.seq, m), big)
-        node.create_subscription(ActuatorCommand, '/eha/command',
-                                 lambda m: self.commands.__setitem__(m.seq, m), big)
-        node.create_subscription(PlantTruth, '/eha/sim/truth', self.on_truth, big)
+        self.estimates = self.by_seq(PositionEstimate, '/eha/estimate', big)
+        self.commands = self.by_seq(ActuatorCommand, '/eha/command', big)
+        self.truth = {}
+        self.subscribe(PlantTruth, '/eha/sim/truth', self.on_truth, big)
         self.closed = {}                    # seq -> both pump valves closed (truth)
         keep = latched_qos()
         keep.depth = 100
-        node.create_subscription(RedundancyStatus, '/eha/redundancy', self.status.append, keep)
-        node.create_subscription(ChannelSelect, '/eha/channel_select', self.selects.append,
-                                 keep)
-        node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diag, 100)
+        self.status = self.received(RedundancyStatus, '/eha/redundancy', keep)
+        self.selects = self.received(ChannelSelect, '/eha/channel_select', keep)
         self.load = node.create_publisher(ExternalLoad, '/eha/sim/load_force', stream_qos())
         self.Load = ExternalLoad
 
@@ -46,9 +42,10 @@ class Watch:
         self.truth[m.seq] = m.position
         self.closed[m.seq] = max(m.valve_fraction) < 0.01
 
-    def on_diag(self, msg):
-        for st in msg.status:
-            self.diag[st.name] = st
+    @property
+    def diag(self) -> dict:
+        """name -> its newest DiagnosticStatus."""
+        return {n: s.msg for n, s in self.diagnostics.latest_by_name().items()}
 
     def tick(self) -> int:
         return max(self.truth, default=-1)
@@ -110,8 +107,8 @@ def test_stuck_sensor_leads_to_zero_speed_and_hydraulic_lock(ros_node, tmp_path)
     # only by the cross-piston leakage, C_c (F / A_p) / A_p. The plant applies a channel
     # select when it arrives (not tick-locked, unlike commands): the lock's tick over DDS
     # depends on the machine (the batch campaigns give its time: 29 ms after a stuck sensor)
-    from eha_ros.core.batch import node_params
-    from eha_ros.core.plant_sim_params import SCHEMA
+    from eha_ros.core.sim.batch import node_params
+    from eha_ros.core.plant.node_params import SCHEMA
     p = node_params('plant_sim', SCHEMA)
     A_p = p['plant.cylinder.A_p']
     creep = p['plant.cylinder.C_c'] * (5e3 / A_p) / A_p

@@ -1,4 +1,4 @@
-"""The loop supervisor (core.supervisor, in the switch manager): each condition trips it from
+"""The loop supervisor (core.loop.supervisor, in the switch manager): each condition trips it from
 the first tick that meets it, names the culprit, and the switch_manager node answers with the
 safe state (channel select: drives off, valves closed), one ERROR log line and ERROR on
 /diagnostics at once.
@@ -13,8 +13,9 @@ import time
 
 import pytest
 
-from eha_ros.core.supervisor import (LIMIT_CYCLE, REJECTED, STALLED, UNANSWERED, LoopSupervisor,
-                                     SupervisorParams)
+from eha_ros.core.loop.supervisor import (LIMIT_CYCLE, REJECTED, STALLED, UNANSWERED,
+                                          LoopSupervisor, SupervisorParams)
+import probes
 from ros_util import start_process, stop_process, wait_for, wait_matched
 
 from eha_ros.core.redundancy.params import SCHEMA
@@ -116,33 +117,31 @@ MONITORS_OFF = [a for m in ('speed', 'current', 'pressure', 'estimator')
                 for a in ('-p', f'switch_manager:switch.health.{m}.enabled:=false')]
 
 
-class Feeder:
+class Feeder(probes.Probe):
     """Publishes state/estimate/command at about 1 kHz from a thread; ``fault`` from tick
     ``fault_at`` on; records the manager's selects and supervisor diagnostics with arrival
     times."""
 
     def __init__(self, node, fault):
-        from diagnostic_msgs.msg import DiagnosticArray
         from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect,
                                   PositionEstimate)
         from eha_ros.nodes.common import latched_qos, stream_qos
+        super().__init__(node)
         self.State, self.Est, self.Cmd = ActuatorState, PositionEstimate, ActuatorCommand
         self.pubs = [node.create_publisher(t, f'/eha/{n}', stream_qos()) for t, n in
                      ((ActuatorState, 'state'), (PositionEstimate, 'estimate'),
                       (ActuatorCommand, 'command'))]
         self.fault, self.fault_at, self.t_fault = fault, None, None
-        self.selects, self.errors = [], []
-        node.create_subscription(ChannelSelect, '/eha/channel_select',
-                                 lambda m: self.selects.append((time.monotonic(), m)),
-                                 latched_qos())
-        node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diag, 50)
+        self.selects = self.received(ChannelSelect, '/eha/channel_select', latched_qos(),
+                                     stamped=True)
         self.stop = threading.Event()
         self.k = 0
 
-    def on_diag(self, msg):
-        for s in msg.status:
-            if s.name == 'switch_manager: supervisor' and s.level == b'\x02':
-                self.errors.append((time.monotonic(), s.message))
+    @property
+    def errors(self) -> list:
+        """(arrival time, message) of every ERROR of the supervisor."""
+        return [(s.t, s.message) for s in self.diagnostics.all('switch_manager: supervisor')
+                if s.level == 2]
 
     def run(self):
         ps, pe, pc = self.pubs
@@ -212,5 +211,5 @@ def test_node_trips_to_the_safe_state(ros_node, tmp_path, fault, kind):
 
 def _cfg(name):
     import os
-    from eha_ros.core.params import default_config_dir
+    from eha_ros.core.config.params import default_config_dir
     return os.path.join(default_config_dir(), name)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from eha_ros.core.cli import UsageError
+from eha_ros.core.config.cli import UsageError
 from eha_ros.core.sweep.analysis import bandwidth_hz, chirp_h1, sine_point, summarize
 from eha_ros.core.sweep.signals import Chirp, SteppedSine, check_sweep
 

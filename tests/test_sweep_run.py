@@ -71,7 +71,7 @@ def test_bad_sweep_options_one_line(args, words, tmp_path):
 def test_a_finished_run_is_never_overwritten(tmp_path):
     """--name of a folder holding a finished run (summary.json of scripts/run, stack.json of
     run_stack) gets a new folder beside it; an unfinished one is reused."""
-    from eha_ros.core.report import run_dir
+    from eha_ros.core.io.report import run_dir
     for marker in ('summary.json', 'stack.json'):
         base = tmp_path / marker
         (base / 'r').mkdir(parents=True)

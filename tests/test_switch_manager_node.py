@@ -15,10 +15,11 @@ import time
 import numpy as np
 import pytest
 
-from eha_ros.core.redundancy import batch as B
+from eha_ros.core.sim import switchover as B
 from eha_ros.core.redundancy.events import EventLog, read_log
 from eha_ros.stack import Stack
 from eha_ros.tools.plot_switch import plot_switches, write_csv
+import probes
 from ros_util import Spinner, wait_for
 
 pytestmark = pytest.mark.ros
@@ -48,37 +49,31 @@ def ref_at(t):
     return AMP * math.sin(2 * math.pi * FREQ * t) if t > 0 else 0.0
 
 
-class Recorder:
+class Recorder(probes.Probe):
     """Test-side node: records truth/state/status/select/diagnostics and publishes the
     reference REF_LEAD ticks ahead on every truth sample (1 kHz, locked to plant ticks)."""
 
     def __init__(self, node):
         from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, ExternalLoad,
                                   PlantTruth, PositionReference, RedundancyStatus)
-        from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.qos import QoSProfile
         from eha_ros.nodes.common import latched_qos
-        self.node = node
+        super().__init__(node)
         self.seq0 = None
         self.truth, self.state = {}, {}
-        self.status, self.selects, self.diags = [], [], []
         self.commands = 0
         self.last_seq = 0
-        self.plant_diag = {}
         big = QoSProfile(depth=2000)
         self.Ref, self.Load = PositionReference, ExternalLoad
         self.ref_pub = node.create_publisher(PositionReference, '/eha/reference', 10)
         self.load_pub = node.create_publisher(ExternalLoad, '/eha/sim/load_force', 10)
-        node.create_subscription(PlantTruth, '/eha/sim/truth', self.on_truth, big)
-        node.create_subscription(ActuatorState, '/eha/state', self.on_state, big)
+        self.subscribe(PlantTruth, '/eha/sim/truth', self.on_truth, big)
+        self.subscribe(ActuatorState, '/eha/state', self.on_state, big)
         keep = latched_qos()
         keep.depth = 200                        # every status, not only the latest
-        node.create_subscription(RedundancyStatus, '/eha/redundancy', self.status.append, keep)
-        node.create_subscription(ChannelSelect, '/eha/channel_select', self.selects.append,
-                                 keep)
-        node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diag, 50)
-        self.cmd_sub = node.create_subscription(ActuatorCommand, '/eha/command',
-                                                self.on_command, 10)
+        self.status = self.received(RedundancyStatus, '/eha/redundancy', keep)
+        self.selects = self.received(ChannelSelect, '/eha/channel_select', keep)
+        self.cmd_sub = self.subscribe(ActuatorCommand, '/eha/command', self.on_command, 10)
 
     def on_command(self, msg):
         self.commands += 1
@@ -96,27 +91,23 @@ class Recorder:
             self.state[m.seq] = (bool(m.drive_enabled[0]), bool(m.drive_enabled[1]),
                                  int(m.active_channel))
 
-    def on_diag(self, msg):
-        for st in msg.status:
-            if st.name.startswith('plant_sim'):
-                self.plant_diag = {kv.key: kv.value for kv in st.values}
-            if st.name == 'switch_manager: redundancy':
-                self.diags.append((st.level, st.message,
-                                   {kv.key: kv.value for kv in st.values}))
+    @property
+    def plant_diag(self) -> dict:
+        """The plant's newest status values."""
+        return self.diagnostics.values('plant_sim', prefix=True)
+
+    @property
+    def diags(self) -> list:
+        """(level, message, values) of every status of the switch manager's redundancy."""
+        return [(s.msg.level, s.message, s.values)
+                for s in self.diagnostics.all('switch_manager: redundancy')]
 
     def tau(self):
         return (self.last_seq - self.seq0) * TS if self.seq0 is not None else -1.0
 
     def wait_tau(self, tau, timeout=60.0):
-        assert wait_for(lambda: self.tau() >= tau, timeout, 0.001), \
-            f'plant time {self.tau():.3f} s did not reach {tau} s'
-
-    def call(self, srv_type, name, **fields):
-        client = self.node.create_client(srv_type, name)
-        assert client.wait_for_service(timeout_sec=30), f'no {name} service'
-        fut = client.call_async(srv_type.Request(**fields))
-        assert wait_for(fut.done, 20), f'{name} did not answer'
-        return fut.result()
+        self.wait(lambda: self.tau() >= tau, timeout,
+                  lambda: f'plant time {self.tau():.3f} s did not reach {tau} s', period=0.001)
 
     def arrays(self):
         """Truth and state matched by seq: t (scenario time), x, ref, w[2], valve[2], enable[2]."""
@@ -168,13 +159,13 @@ def run(rclpy_session, tmp_path_factory):
         rec.wait_tau(T_LOAD)
         rec.load_pub.publish(rec.Load(force=LOAD))
         rec.wait_tau(T_CMD)
-        out['responses']['switch'] = rec.call(SwitchChannel, '/eha/switch_channel', channel=1,
-                                              reason='Table 3.4 switch at 3 s')
+        out['responses']['switch'] = rec.service(SwitchChannel, '/eha/switch_channel', channel=1,
+                                                 reason='Table 3.4 switch at 3 s')
         for tau, ch, key in ((T_FAIL_B, 1, 'fail_b'), (T_FAIL_A, 0, 'fail_a')):
             rec.wait_tau(tau)
-            out['responses'][key] = rec.call(InjectFault, '/eha/inject_fault',
-                                             fault='motor_fail', channel=ch, magnitude=0.0,
-                                             duration=0.0)
+            out['responses'][key] = rec.service(InjectFault, '/eha/inject_fault',
+                                                fault='motor_fail', channel=ch, magnitude=0.0,
+                                                duration=0.0)
         rec.wait_tau(T_END)
         time.sleep(1.5)                        # a diagnostics period after the end
         out['diag1'] = dict(rec.plant_diag)

@@ -1,9 +1,23 @@
 """ament_python package of the EHA SIL stack (colcon build on a ROS install, pip in the venv)."""
+import importlib.util
+import os
+import sys
+
 from setuptools import find_packages, setup
 
 PACKAGE = 'eha_ros'
-NODES = ['plant_sim', 'hardware_bridge', 'estimator', 'controller', 'switch_manager', 'sweep',
-         'recorder', 'eha_loop', 'live']
+
+
+def _registry():
+    """eha_ros/core/config/registry.py (standard library only), read before the install."""
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), PACKAGE, 'core', 'config',
+                        'registry.py')
+    spec = importlib.util.spec_from_file_location('eha_registry', path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module        # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
 
 setup(
     name=PACKAGE,
@@ -21,6 +35,6 @@ setup(
     description='EHA software-in-the-loop stack',
     license='Apache-2.0',
     entry_points={
-        'console_scripts': [f'{n} = {PACKAGE}.nodes.{n}:main' for n in NODES],
+        'console_scripts': _registry().entry_points(),
     },
 )

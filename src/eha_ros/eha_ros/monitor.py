@@ -8,7 +8,7 @@ import os
 import threading
 import time
 
-from .core.cli import UsageError
+from .core.config.cli import UsageError
 from .stack import cpu_seconds
 
 ERROR = 2                       # diagnostic_msgs/DiagnosticStatus ERROR (3: STALE)

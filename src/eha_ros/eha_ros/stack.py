@@ -13,12 +13,10 @@ import subprocess
 import sys
 import time
 
-from .core.batch import NODE_FILES
-from .core.hardware.params import LOOP_PREFIX
-from .core.params import default_config_dir
-
+from .core.config.params import default_config_dir
 # plant-side nodes and the prefix of their loop parameters (core.hardware.params.loop_params):
 # their own lock-step switch (they publish /clock; the others use sim time) and start gate
+from .core.config.registry import LOOP_NODES as _LOOP, LOOP_PREFIX, NODE_FILES, PLANT_NODES
 
 
 def proc_stat(pid: int) -> list[str]:
@@ -73,14 +71,14 @@ def node_command(name: str, config_dir: str | None = None, extra=(), files=None)
 
 
 # the 1 kHz loop: what eha_loop can host in one process (plant side first)
-LOOP_NODES = ('plant_sim', 'hardware_bridge', 'estimator', 'controller', 'switch_manager')
+LOOP_NODES = PLANT_NODES + _LOOP
 
 
 def composed_command(nodes, config_dir: str | None = None, extra=None) -> list[str]:
     """eha_loop hosting ``nodes`` (plant side + loop nodes) with the union of their params
     files; per-node ``extra`` arguments (-p name:key:=value form) are passed through."""
     plant = 'bridge' if 'hardware_bridge' in nodes else 'sim'
-    others = [n for n in nodes if n not in ('plant_sim', 'hardware_bridge')]
+    others = [n for n in nodes if n not in PLANT_NODES]
     files: list[str] = []
     for n in nodes:
         files += [f for f in NODE_FILES[n] if f not in files]
@@ -194,13 +192,13 @@ class Stack:
     def _recover(self) -> dict:
         """The recorder did not finish its file (killed, or failed): make it a finished one
         with everything that reached the disk (recording.recover)."""
-        from .core.recording import recover
+        from .core.io.recording import recover
         try:
             return recover(self.record)
         except OSError as err:
             return {'error': f'{self.record}: recovery failed: {err.strerror or err} (it still '
-                             f'reads with core.recording.read, up to its last complete chunk; '
-                             f'core.recording.recover finishes it once there is room)'}
+                             f'reads with core.io.recording.read, up to its last complete chunk; '
+                             f'core.io.recording.recover finishes it once there is room)'}
 
     @staticmethod
     def _stop_group(procs: dict, end: float) -> dict:

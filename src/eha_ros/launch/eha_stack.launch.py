@@ -16,7 +16,7 @@ from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from eha_ros.core.params import default_config_dir
+from eha_ros.core.config.params import default_config_dir
 from eha_ros.tools.run_stack import launch_entries
 
 ARGS = {'plant': ('sim', 'sim: plant_sim | bridge: hardware_bridge to the drive'),

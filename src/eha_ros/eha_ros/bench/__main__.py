@@ -9,8 +9,8 @@ import pkgutil
 import platform
 import sys
 
-from ..core.cli import UsageError, guarded
-from ..core.report import write_json
+from ..core.config.cli import UsageError, guarded
+from ..core.io.report import write_json
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 

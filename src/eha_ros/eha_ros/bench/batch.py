@@ -1,5 +1,5 @@
 """Batch closed-loop benchmark (issue 10: at least 50 simulated s per wall s): nonlinear plant,
-estimator, QFT controller and switch manager in one process (core.batch.BatchLoop, compiled
+estimator, QFT controller and switch manager in one process (core.sim.batch.BatchLoop, compiled
 segments between events), on a Table 3.4-like scenario: 3 Hz 3 mm sine, 10 kN load step at
 1 s, commanded switch A -> B at 30 % of the run, motor_fail on B at 60 % (automatic switch
 back to A): at the default 10 s, 3 s and 6 s.
@@ -34,24 +34,23 @@ from ..core.jit_cache import drop_stale
 from ..core.redundancy import stepper as RS
 from . import arg as _arg
 
-drop_stale(__file__, '../core', '../core/plant', '../core/estimator', '../core/controller',
-           '../core/redundancy')
+drop_stale(__file__, '../core/sim', '../core/plant', '../core/estimator', '../core/controller',
+           '../core/redundancy', '../core/loop')
 
 
 def scenario(duration: float):
-    from ..core.redundancy.batch import Scenario
+    from ..core.sim.switchover import Scenario
     return Scenario(duration=duration, commands=[(0.3 * duration, 1, 'bench')],
                     faults=[(0.6 * duration, 'motor_fail', 1, 0.0, 0.0)])
 
 
 def build(scn):
-    """(BatchLoop, references, loads) as core.redundancy.batch.run builds them."""
-    from ..core.batch import BatchLoop
-    from ..core.redundancy import batch as B
+    """(BatchLoop, references, loads) as core.sim.switchover.run builds them."""
+    from ..core.sim.batch import BatchLoop, node_params
+    from ..core.sim import switchover as B
     from ..core.plant import EhaPlant
-    from ..core.plant.parameters import PLANT_SCHEMA
-    from ..core.params import load
-    plant = EhaPlant(load(PLANT_SCHEMA, [B.config('plant.yaml')]), seed=scn.seed)
+    from ..core.plant.node_params import SCHEMA as PLANT_SIM
+    plant = EhaPlant(node_params('plant_sim', PLANT_SIM), seed=scn.seed)
     Ts = plant.Ts
     ctl, hold = B.make_controller(Ts)
     n = int(round(scn.duration / Ts))
@@ -125,8 +124,8 @@ def run(args=None) -> dict:
     res['batch_setup_s_median'] = statistics.median(setups)   # config, objects, references
     res['batch_compiled_tick_fraction'] = min(fractions)
     res['batch_python_ticks'] = int(round((1 - min(fractions)) * n))
-    # end to end: core.redundancy.batch.run (config, objects, references, loop, columns)
-    from ..core.redundancy.batch import run as run_scenario
+    # end to end: core.sim.switchover.run (config, objects, references, loop, columns)
+    from ..core.sim.switchover import run as run_scenario
     _, wall, cpu = timed(lambda: run_scenario(scenario(duration)))
     res['batch_end_to_end_sim_s_per_wall_s'] = duration / wall
     res['batch_end_to_end_sim_s_per_cpu_s'] = duration / cpu
@@ -152,7 +151,7 @@ def _plant(S, P, U, T, nsub, block, meas, aux, ring, table, u, f):
 
 def components(rec, refs, loads, repeats: int = 3) -> dict:
     """us/tick of each compiled stepper replaying the recorded run (best of ``repeats``)."""
-    from ..core.closed_loop import R_CHANNEL, R_IM, R_PM, R_U, R_WM, R_XHAT, R_XM
+    from ..core.sim.closed_loop import R_CHANNEL, R_IM, R_PM, R_U, R_WM, R_XHAT, R_XM
     loop, _, _ = build(scenario(0.01))
     loop.run(np.zeros(2), np.zeros(2))                     # start estimator and controller
     rc = np.ascontiguousarray(rec.T)

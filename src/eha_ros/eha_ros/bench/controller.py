@@ -13,7 +13,7 @@ import numpy as np
 
 
 def core_cost(n: int = 20000) -> dict:
-    from ..core.batch import node_params
+    from ..core.sim.batch import node_params
     from ..core.controller.params import SCHEMA
     from ..core.controller.position import PositionController
     ctl = PositionController.from_params(node_params('controller', SCHEMA))

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from ..core.params import default_config_dir, load
+from ..core.config.params import default_config_dir, load
 from ..core.estimator.params import SCHEMA
 
 
@@ -34,7 +34,7 @@ def _params(overrides=None) -> dict:
 
 def _recorded_measurements(params: dict, n: int):
     """n ticks of plant measurements under a 1 Hz, 5 mm sine (closed on the truth)."""
-    from ..core.pid import PID
+    from ..core.controller.pid import PID
     from ..core.plant import EhaPlant
     plant = EhaPlant(params, seed=1)
     pid = PID.table_3_8(plant.Ts)

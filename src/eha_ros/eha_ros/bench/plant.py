@@ -15,7 +15,7 @@ from . import arg as _arg
 
 
 def run(args=None) -> dict:
-    from ..core.pid import PID
+    from ..core.controller.pid import PID
     from ..core.plant import EhaPlant
     from ..core.plant.parameters import nominal_plant
     from ..core.plant import layout as L

@@ -8,12 +8,12 @@ import numpy as np
 
 
 def run(args=None) -> dict:
-    from ..core.params import load
+    from ..core.config.params import load
     from ..core.plant.parameters import PLANT_SCHEMA
     from ..core.qft import bounds as qb
     from ..core.qft import family, lti
     from ..core.qft.spec import default_spec
-    from ..core.params import default_config_dir
+    from ..core.config.params import default_config_dir
     import os
     plant = load(PLANT_SCHEMA, [os.path.join(default_config_dir(), 'plant.yaml')])
     spec = default_spec()

@@ -8,7 +8,7 @@ import os
 import tempfile
 import time
 
-from ..core import recording
+from ..core.io import recording
 from ..stack import Stack, cpu_seconds
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']

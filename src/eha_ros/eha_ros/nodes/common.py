@@ -16,8 +16,8 @@ import threading
 import time
 from typing import Callable
 
-from ..core.cli import guarded
-from ..core.params import ParamError, Schema, ROS_BUILTINS, load, parse_ros_args
+from ..core.config.cli import guarded
+from ..core.config.params import ParamError, Schema, ROS_BUILTINS, load, parse_ros_args
 
 # QoS of the 1 kHz streams: reliable, a queue deep enough that a recorder or monitor that
 # falls behind for a while (lock-step bursts, start-up) does not lose samples.

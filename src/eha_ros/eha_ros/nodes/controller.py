@@ -1,7 +1,7 @@
 """controller node: answers each eha/estimate with one eha/command (same seq) from the QFT
 position controller (core.controller.PositionController), follows eha/reference, holds its
 integrator through channel switches (eha/redundancy), and goes to zero speed when estimates
-stop or go stale for more than watchdog_ticks, or in the safe state (core.safe_state: the
+stop or go stale for more than watchdog_ticks, or in the safe state (core.loop.safe_state: the
 estimate reports a position fault or the switch manager is FAILED_SAFE); it recovers from
 both without a jump.
 
@@ -16,35 +16,22 @@ from __future__ import annotations
 
 import sys
 import time
-from collections import deque
 
 import numpy as np
 
 from ..core.controller.params import SCHEMA
 from ..core.controller.position import PositionController
-from ..core.stats import Counters, LoopStats
+from ..core.controller.tick_sync import TickSync
+from ..core.controller.velocity_loop import drive_mismatch
+from ..core.loop.stats import Counters, LoopStats
 from . import diag
 from .managed import autostart, state_label, transition
 from .common import (PLANT_STATE_TOPIC, clock_s, declare_and_validate, latched_qos, node_base,
                      publish_counted, run, stream_qos)
 
 
-def drive_mismatch(p: dict) -> float:
-    """Relative mismatch between velocity_controller (YAML) and the drive gains of plant.yaml."""
-    k_t, kp, ki, wl = (p['plant.motor.k_T'], p['plant.drive.Kp_w'], p['plant.drive.Ki_w'],
-                       p['plant.drive.lowpass_w'])
-    num = np.array(p['velocity_controller.num'], float)
-    den = np.array(p['velocity_controller.den'], float)
-    num, den = num / den[0], den / den[0]
-    want_num, want_den = np.array([wl * kp / k_t, wl * ki / k_t]), np.array([1.0, wl, 0.0])
-    if num.shape != want_num.shape or den.shape != want_den.shape:
-        return float('inf')
-    return float(max(np.max(np.abs(num - want_num) / np.abs(want_num)),
-                     abs(den[1] - wl) / wl, abs(den[2])))
-
-
 def make_node(params: dict):
-    from ..core import safe_state as SAFE
+    from ..core.loop import safe_state as SAFE
     from ..core.estimator.adapt import VERDICTS
     from ..core.redundancy.state_machine import FAILED_SAFE
     Node = node_base()
@@ -70,7 +57,7 @@ def make_node(params: dict):
             self.switch_ticks = int(round(p['control.switch_hold'] / self.Ts))
             self.last_good = None          # monotonic time of the last fresh estimate
             self.tripped = False
-            self.safe = None                    # reason while in the safe state (core.safe_state)
+            self.safe = None                    # why in the safe state (core.loop.safe_state)
             self.manager_state = None           # from eha/redundancy
             self.last_seq = 0
             self.last_speed = 0.0
@@ -79,10 +66,8 @@ def make_node(params: dict):
             self.plant_state = None             # eha/plant_state label; None: not heard (active)
             self.idle = False                   # inactive: the next fresh estimate restarts
             self.enabled = False                # own lifecycle state ACTIVE
-            self.pending = deque(maxlen=2000)   # tick-locked references waiting for their tick
-            self.ref_seq = 0                    # newest tick-locked reference seen
-            self.held = deque()                 # lock-step: estimates waiting for their reference
             self.lockstep = bool(self.get_parameter('use_sim_time').value)
+            self.sync = TickSync(self.lockstep, counters=self.c)   # references <-> estimates
             self.loop = LoopStats(self.Ts)
             self.cmd = ActuatorCommand()
             qos = stream_qos()
@@ -157,13 +142,10 @@ def make_node(params: dict):
         def on_reference(self, msg):
             """seq 0: apply now. seq k > 0: a tick-locked source (the sweep) -> apply when the
             estimate of tick k is handled, so reference timing does not depend on DDS order."""
-            if msg.seq > 0:
-                self.ref_seq = max(self.ref_seq, msg.seq)
-            if msg.seq > 0 and msg.seq > self.last_seq:
-                self.pending.append((msg.seq, msg.position))
+            if self.sync.reference(msg.seq, msg.position, self.last_seq):
+                self.apply_reference(msg.position)
+            else:
                 self.release_held()
-                return
-            self.apply_reference(msg.position)
 
         def apply_reference(self, position):
             clamped = self.c.get('clamped_references', 0)
@@ -212,17 +194,12 @@ def make_node(params: dict):
         def on_estimate(self, msg):
             """Lock-step with a tick-locked reference source (the sweep): estimate(k) waits for
             reference(k), so the loop (and its results) do not depend on who runs faster."""
-            if self.lockstep and self.ref_seq > 0 and msg.seq > self.ref_seq:
-                self.held.append((time.monotonic(), msg))
-                return
-            self.process_estimate(msg)
+            if not self.sync.hold(msg, time.monotonic()):
+                self.process_estimate(msg)
 
         def release_held(self, force=False):
-            while self.held and (force or self.held[0][1].seq <= self.ref_seq or
-                                 time.monotonic() - self.held[0][0] > 0.05):
-                if not force and self.held[0][1].seq > self.ref_seq:
-                    self.c.bump('reference_wait_timeouts')
-                self.process_estimate(self.held.popleft()[1])
+            while (msg := self.sync.pop_ready(time.monotonic(), force)) is not None:
+                self.process_estimate(msg)
 
         def process_estimate(self, msg):
             if self.lockstep and self.answer is not None and self.answer[0] == msg.seq and \
@@ -236,8 +213,8 @@ def make_node(params: dict):
             now = clock_s(self)
             self.loop.arrived(now)
             self.last_seq = msg.seq
-            while self.pending and self.pending[0][0] <= msg.seq:
-                self.apply_reference(self.pending.popleft()[1])
+            for position in self.sync.due(msg.seq):
+                self.apply_reference(position)
             fresh = not msg.stale and np.isfinite(msg.position)
             if not fresh:
                 self.c.bump('stale_estimates')

@@ -15,15 +15,14 @@ import argparse
 import importlib
 import sys
 
-from ..core.cli import UsageError, guarded
-from ..core.params import load, parse_ros_args
+from ..core.config.cli import UsageError, guarded
+from ..core.config.params import load, parse_ros_args
+from ..core.config.registry import GUESTS, LOOP_NODES
 from . import common
 
 COMPOSED_STALE_CHECK = 0.005   # s: estimator.node.timer_period in eha_loop unless given
-LOOP_NODES = ('estimator', 'controller', 'switch_manager')
-# may join the loop's process: the live view then takes the loop topics in-process (the
+# GUESTS may join the loop's process: the live view then takes the loop topics in-process (the
 # message object, serialized only for a subscribed viewer) instead of a second DDS delivery
-GUESTS = ('live',)
 PLANTS = {'sim': 'plant_sim', 'bridge': 'hardware_bridge'}
 # s: Python's default. Shorter (0.2 ms tried) lets a 1 kHz executor timer preempt the loop
 # thread mid-tick, only to block on the callback lock: two thread switches per timer tick.

@@ -15,7 +15,7 @@ import time
 from ..core.estimator.estimator import Estimator
 from ..core.estimator.fault_detector import NAMES
 from ..core.estimator.params import SCHEMA
-from ..core.stats import Counters, LoopStats
+from ..core.loop.stats import Counters, LoopStats
 from . import diag
 from .common import (clock_s, declare_and_validate, node_base, publish_counted, run,
                      stream_qos)
@@ -101,7 +101,7 @@ def make_node(params: dict):
             name = adapt.VERDICTS[verdict]
             if adapt.safe_state(verdict):
                 self.get_logger().error(f'seq {seq}: {name}: the position sensor is faulty '
-                                        f'(safe state required: core.safe_state)')
+                                        f'(safe state required: core.loop.safe_state)')
             elif adapt.alarm(verdict):
                 self.get_logger().error(f'seq {seq}: {name}: filter and position sensor disagree '
                                         f'beyond the sensor band (the estimate falls back on '

@@ -4,7 +4,7 @@ Every topic under /eha (plus /diagnostics) is found as it appears (nodes.tap: ra
 publishers' QoS) and served as a channel with message encoding ``cdr`` and a ``ros2msg``
 schema holding the full message definition, the bytes exactly as sent: the Foxglove app,
 Lichtblick and PlotJuggler decode them without the packages. Inside eha_loop (run_stack
---live) the loop's topics arrive in-process as message objects, encoded here (core.cdr). A
+--live) the loop's topics arrive in-process as message objects, encoded here (core.io.cdr). A
 message is only taken while a client is subscribed to its channel (``Channel.has_sinks``),
 queued, and handed to the server in one burst every ``live.flush_period``;
 ``live.decimation`` keeps every N-th message of a topic. log time = the message's header stamp (sim time in lock-step, where
@@ -25,32 +25,15 @@ import sys
 import threading
 import time
 
-from ..core import cdr
-from ..core.live_params import SCHEMA
-from ..core.mcap_sink import stamp_ns
-from ..core.params import ParamError
-from ..core.ws_subprotocol import SubprotocolRelay
+from ..core.io import cdr
+from ..core.io.live_params import SCHEMA, decimation
+from ..core.io.mcap_sink import stamp_ns
+from ..core.config.params import ParamError
+from ..core.io.ws_subprotocol import SubprotocolRelay
 from . import diag, msgdefs
 from .compose import unlocked
 from .common import declare_and_validate, node_base, run
 from .tap import TopicTap
-
-
-def decimation(entries) -> dict[str, int]:
-    """['/eha/sim/truth:10', ...] -> {'/eha/sim/truth': 10}; ParamError names a bad entry."""
-    out = {}
-    for item in entries:
-        if not item:
-            continue
-        topic, sep, n = item.rpartition(':')
-        try:
-            every = int(n)
-        except ValueError:
-            every = 0
-        if not sep or not topic.startswith('/') or every < 1:
-            raise ParamError(f"live.decimation: {item!r}: expected '/topic:N' with N >= 1")
-        out[topic] = every
-    return out
 
 
 def to_dict(msg):
@@ -156,7 +139,7 @@ def make_node(params: dict):
             if sim_time:
                 caps.append(foxglove.Capability.Time)
             # the SDK server on a private port, behind the relay that also accepts the
-            # protocol's older name (core.ws_subprotocol)
+            # protocol's older name (core.io.ws_subprotocol)
             self.server = foxglove.start_server(
                 name='eha live', host='127.0.0.1', port=0, capabilities=caps,
                 server_listener=_Listener(self), supported_encodings=['json'])
@@ -222,7 +205,7 @@ def make_node(params: dict):
 
         @staticmethod
         def encoder(type_name):
-            """msg -> CDR bytes: core.cdr's one struct.pack where the type has a fixed layout
+            """msg -> CDR bytes: core.io.cdr's one struct.pack where the type has a fixed layout
             (every eha_msgs type), else serialize_message."""
             try:
                 return cdr.encoder(msgdefs.message_class(type_name))

@@ -28,11 +28,11 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from ..core.cli import UsageError
+from ..core.config.cli import UsageError
 from ..core.hardware.gate import CommandGate
 from ..core.hardware.interface import HardwareError
-from ..core.params import ParamError, Schema
-from ..core.stats import Counters, Histogram, RingStats
+from ..core.config.params import ParamError, Schema
+from ..core.loop.stats import Counters, Histogram, RingStats
 from . import diag
 from .common import (PlantState, StartGate, channel_ok, declare_and_validate, latched_qos,
                      node_base, publish_counted, stream_qos)

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import sys
 
-from ..core.hardware.params import LOOP_PREFIX
+from ..core.config.registry import LOOP_PREFIX
 from ..core.hardware.sim import SimHardware
-from ..core.plant_sim_params import SCHEMA
+from ..core.plant.node_params import SCHEMA
 from .common import run
 from .plant_side import Program, make_node as make_plant_side
 

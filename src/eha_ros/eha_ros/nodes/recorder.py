@@ -2,7 +2,7 @@
 
 Topics are discovered periodically (wall-time timer, nodes.tap: raw CDR with the publishers'
 QoS), so topics that appear later are caught.
-Messages go to a writer thread (core.mcap_sink) with log_time = receive time (wall clock) and
+Messages go to a writer thread (core.io.mcap_sink) with log_time = receive time (wall clock) and
 publish_time = header stamp. On SIGINT/SIGTERM the queues are drained and the file finished;
 message counts per topic go to /diagnostics and to the log.
 """
@@ -13,8 +13,8 @@ import os
 import sys
 import time
 
-from ..core.mcap_sink import McapSink
-from ..core.recorder_params import SCHEMA
+from ..core.io.mcap_sink import McapSink
+from ..core.io.recorder_params import SCHEMA
 from . import diag
 from .common import declare_and_validate, node_base, run
 from .tap import TopicTap, qos_yaml

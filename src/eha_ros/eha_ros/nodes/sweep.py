@@ -18,10 +18,10 @@ import os
 import sys
 import time
 
-from ..core.params import default_config_dir, load
-from ..core.report import run_dir
+from ..core.config.params import default_config_dir, load
+from ..core.io.report import run_dir
 from ..core.sweep.params import SCHEMA, build_plan
-from ..core.stats import LoopStats
+from ..core.loop.stats import LoopStats
 from ..core.sweep.session import from_params, print_table
 from . import diag
 from .common import (PLANT_STATE_TOPIC, declare_and_validate, latched_qos, node_base,
@@ -33,7 +33,7 @@ MARGIN_TICKS = 30           # data of a tick is complete this many ticks after i
 def model_overlay(p: dict):
     """Closed-loop model from the controller YAML, or None if it cannot be loaded."""
     from ..core.controller.params import TF
-    from ..core.params import Schema
+    from ..core.config.params import Schema
     from ..core.sweep.model import closed_loop
     path = p['sweep.controller_file'] or os.path.join(default_config_dir(), 'controller.yaml')
     try:

@@ -19,8 +19,8 @@ from itertools import islice
 
 from ..core.redundancy import ChannelSample, EventLog, SwitchManager
 from ..core.redundancy.params import SCHEMA
-from ..core.stats import Counters, LoopStats
-from ..core.supervisor import LoopSupervisor, SupervisorParams
+from ..core.loop.stats import Counters, LoopStats
+from ..core.loop.supervisor import LoopSupervisor, SupervisorParams
 from . import diag
 from .common import (declare_and_validate, latched_qos, node_base, publish_counted, run,
                      stream_qos)
@@ -34,7 +34,7 @@ SUPERVISOR_CHECK = 0.02      # [s] wall-clock period of the supervisor's stall c
 
 
 def make_node(params: dict):
-    from ..core import safe_state as SAFE
+    from ..core.loop import safe_state as SAFE
     Node = node_base()
     from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, PositionEstimate,
                               RedundancyStatus)

@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 
-from ..core.cli import UsageError, guarded
+from ..core.config.cli import UsageError, guarded
 
 PROG = 'ads_peer'
 
@@ -49,12 +49,12 @@ def parse(argv):
 
 def build(args):
     """The peer from the config folder and the arguments (not started)."""
-    from ..core.batch import node_params
+    from ..core.sim.batch import node_params
     from ..core.bridge.params import SCHEMA as BRIDGE
     from ..core.bridge.peer import AdsPeer
     from ..core.bridge.symbols import load_symbol_map, resolve_path
-    from ..core.params import default_config_dir
-    from ..core.plant_sim_params import SCHEMA as SIM
+    from ..core.config.params import default_config_dir
+    from ..core.plant.node_params import SCHEMA as SIM
     config = args.config or default_config_dir()
     sim = node_params('plant_sim', SIM, config)
     bridge = node_params('hardware_bridge', BRIDGE, config)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..core.cli import guarded
+from ..core.config.cli import guarded
 
 EPILOG = """\
 scenarios: config/campaigns/<name>.yaml ({names}); a path to your own YAML works too.
@@ -17,6 +17,7 @@ Only the plant varies; estimator, controller and switch manager keep config/'s n
 Output (--out, default out/campaign/<scenario>-<family>-<time>/): results.parquet (one row per
 plant), campaign.json, report.md with plots, traces.npz, parts/ (rows as they finish).
 Ctrl-C keeps the finished rows; --resume DIR runs the rest.
+--compare A B: did a change move anything? (e.g. the same campaign before and after a refactoring)
 Scale out: on each machine install the repository (scripts/setup), then
   .venv/bin/dask scheduler                       # on one machine, port 8786
   .venv/bin/dask worker tcp://HOST:8786 --nthreads 1 --nworkers N   # on every machine
@@ -48,10 +49,21 @@ def main(argv=None) -> int:
                     help='finish the interrupted campaign in DIR')
     ap.add_argument('--no-report', action='store_true', help='skip report.md and its plots')
     ap.add_argument('--quiet', action='store_true', help='no progress lines')
+    ap.add_argument('--compare', nargs=2, metavar=('DIR_A', 'DIR_B'), default=None,
+                    help='run nothing: compare two campaign folders run by run (every column '
+                         'of results.parquet and every trace array, exactly); exit 0 when '
+                         'identical, 1 when not')
     args = ap.parse_args(argv)
 
     def run():
-        from ..core.cli import UsageError
+        from ..core.config.cli import UsageError
+        if args.compare:
+            if args.scenario or args.resume:
+                raise UsageError('--compare runs nothing: drop the scenario and --resume')
+            from ..core.sim.compare import compare, summary
+            result = compare(*args.compare)
+            print('\n'.join(summary(result)))
+            return 0 if result.identical else 1
         from ..core.sim.campaign import run_campaign
         if args.workers is not None and args.workers < 1:
             raise UsageError(f'--workers {args.workers}: expected at least 1')

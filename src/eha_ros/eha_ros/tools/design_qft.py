@@ -16,8 +16,8 @@ import time
 
 import numpy as np
 
-from ..core.cli import UsageError, guarded
-from ..core.params import load
+from ..core.config.cli import UsageError, guarded
+from ..core.config.params import load
 from ..core.plant.parameters import PLANT_SCHEMA
 from ..core.qft import bounds as qb
 from ..core.qft import antiwindup as aw

@@ -2,7 +2,7 @@
 
     python -m eha_ros.tools.param_docs [--out docs/parameters.md] [--check]
 
-One Markdown table per node of eha_ros.core.schemas (parameter, type, unit, default, range,
+One Markdown table per node of eha_ros.core.config.registry (parameter, type, unit, default, range,
 description), so the reference cannot drift from what the nodes accept. tests/test_docs.py
 fails when the committed file differs from what this writes.
 """
@@ -13,7 +13,8 @@ import math
 import os
 import sys
 
-from ..core.cli import UsageError, guarded
+from ..core.config.cli import UsageError, guarded
+from ..core.config.params import check_parts
 
 PROG = 'param_docs'
 COMMAND = 'python -m eha_ros.tools.param_docs'
@@ -84,16 +85,13 @@ def _range(param) -> str:
 
 
 def _node_files(node: str) -> list[str]:
-    try:
-        from ..core.batch import NODE_FILES
-    except Exception:       # the files are extra information, not the reference itself
-        return []
+    from ..core.config.registry import NODE_FILES
     return list(NODE_FILES.get(node, []))
 
 
 def schemas() -> list:
     """(node, Schema) for every node, in the order of node_names()."""
-    from ..core.schemas import node_names, schema_for
+    from ..core.config.registry import node_names, schema_for
     out = []
     for node in node_names():
         try:
@@ -111,7 +109,7 @@ def render() -> str:
     lines = [
         '# Parameter reference',
         '',
-        f'Generated from the parameter schemas (`eha_ros.core.schemas`) by '
+        f'Generated from the parameter schemas (`eha_ros.core.config.registry`) by '
         f'`eha_ros.tools.param_docs`: do not edit by hand. After changing a schema, regenerate '
         f'with `.venv/bin/{COMMAND}` (tests/test_docs.py fails until the file matches).',
         '',
@@ -135,6 +133,11 @@ def render() -> str:
             default = 'required' if p.required else _code(_value(p.default))
             row = [_code(p.name), p.type, p.unit, default, _range(p), p.doc]
             lines.append('| ' + ' | '.join(_cell(c) for c in row) + ' |')
+        checks = [' '.join((c.__doc__ or c.__qualname__).split()) for c in check_parts(schema)]
+        if checks:
+            lines += ['', 'Checks across keys (the node and check_config refuse the same files):']
+            lines += [f'- `{c.__module__}.{c.__qualname__}`: {text}'
+                      for c, text in zip(check_parts(schema), checks)]
     return '\n'.join(lines) + '\n'
 
 
@@ -153,7 +156,7 @@ def main(argv=None) -> int:
         prog=PROG,
         description='Write the parameter reference, one Markdown table per node (parameter, '
                     'type, unit, default, range, description), from the schemas of '
-                    'eha_ros.core.schemas.',
+                    'eha_ros.core.config.registry.',
         epilog='Exit codes: 0 written or up to date; 1 --check found the file out of date or '
                'missing; 2 error (one line on stderr).')
     ap.add_argument('--out', default=DEFAULT_OUT,

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-from ..core.cli import UsageError, guarded
+from ..core.config.cli import UsageError, guarded
 
 RPM = 60.0 / (2.0 * np.pi)
 COLUMNS = ('t', 'ref', 'x', 'w0', 'w1', 'valve0', 'valve1')

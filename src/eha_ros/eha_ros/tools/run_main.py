@@ -18,9 +18,9 @@ import sys
 import threading
 import time
 
-from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
-from ..core.params import default_config_dir
-from ..core.report import run_dir
+from ..core.config.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
+from ..core.config.params import default_config_dir
+from ..core.io.report import run_dir
 
 MODES = ('realtime', 'lockstep', 'batch')
 
@@ -78,7 +78,7 @@ def main(argv=None) -> int:
 
 
 def run(args) -> int:
-    from ..core.batch import node_params
+    from ..core.sim.batch import node_params
     from ..core.sweep.params import SCHEMA, build_plan
     require_seconds('--timeout', args.timeout)
     over = sweep_overrides(args)
@@ -122,7 +122,7 @@ def run_batch(args, p, plan, out) -> dict:
     give the numbers of tick-by-tick stepping)."""
     import numpy as np
 
-    from ..core.batch import BatchStack
+    from ..core.sim.batch import BatchStack
     from ..core.sweep.session import from_params
     from ..nodes.sweep import model_overlay
     stack = BatchStack(args.config)

@@ -28,12 +28,11 @@ import shutil
 import sys
 import time
 
-from ..core.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
-from ..core.hardware.params import LOOP_PREFIX
-from ..core.params import default_config_dir
-from ..core.report import reserve_json, run_dir, write_json
+from ..core.config.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
+from ..core.config.registry import LOOP_NODES as LOOP, LOOP_PREFIX
+from ..core.config.params import default_config_dir
+from ..core.io.report import reserve_json, run_dir, write_json
 
-LOOP = ('estimator', 'controller', 'switch_manager')
 # an ERROR from these ends the run: the loop supervisor has put the actuator in its safe state
 # (switch_manager: supervisor), the recording is failing (recorder: mcap)
 STOP_ON_ERROR = {'switch_manager: supervisor': 'loop supervisor', 'recorder: mcap': 'recording'}
@@ -174,8 +173,8 @@ def live_port(args) -> int | None:
         return args.live_port
     if not args.live:
         return None
-    from ..core.batch import node_params
-    from ..core.live_params import SCHEMA
+    from ..core.sim.batch import node_params
+    from ..core.io.live_params import SCHEMA
     return node_params('live', SCHEMA, args.config)['live.port']
 
 

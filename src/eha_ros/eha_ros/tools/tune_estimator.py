@@ -8,9 +8,9 @@ import os
 import re
 import sys
 
-from ..core.cli import guarded
+from ..core.config.cli import guarded
 from ..core.estimator import tuning
-from ..core.params import default_config_dir, load
+from ..core.config.params import default_config_dir, load
 from ..core.plant.parameters import PLANT_SCHEMA
 from ..core.qft.spec import load_spec
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import ctypes
 import struct
 
-from ..params import ParamError
+from ..config.params import ParamError
 from .symbols import PLC_TYPES, SymbolMap
 
 ADSIGRP_SYM_INFOBYNAMEEX = 0xF009

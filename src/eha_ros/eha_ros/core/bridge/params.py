@@ -2,9 +2,10 @@
 bridge uses plant.sim.Ts) plus its own ads.* (link) and bridge.* (safety, lock-step)."""
 from __future__ import annotations
 
-from ..params import Param, Schema
+from ..config.params import Param, Schema
 from ..plant.parameters import PLANT_SCHEMA
-from ..hardware.params import LOOP_PREFIX, loop_params
+from ..config.registry import LOOP_PREFIX
+from ..hardware.params import loop_params
 
 NODE = Schema('hardware_bridge', [
     Param('ads.ams_net_id', 'str', '', '127.0.0.1.1.1',

@@ -15,7 +15,7 @@ from typing import Mapping
 
 import yaml
 
-from ..params import ParamError
+from ..config.params import ParamError
 
 # IEC type -> (struct format, ADS data type id ADST_*, kind)
 PLC_TYPES = {

@@ -105,7 +105,7 @@ class DiscreteSS:
         return ss_output(self._cd, self._dd, self.x, float(u))
 
     def update(self, u: float) -> float:
-        """y[k] and advance the state with u[k] (compiled, shared with core.closed_loop)."""
+        """y[k] and advance the state with u[k] (compiled, shared with core.sim.closed_loop)."""
         return ss_step(self._ad, self._bd, self._cd, self._dd, self.x, float(u), self._tmp)
 
     def reset(self):

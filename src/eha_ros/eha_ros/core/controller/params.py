@@ -2,7 +2,7 @@
 loop settings (config/controller_node.yaml) and the shared plant.* set (config/plant.yaml)."""
 from __future__ import annotations
 
-from ..params import Param, ParamError, Schema
+from ..config.params import Param, ParamError, Schema
 from ..hardware.params import AUTOSTART
 from ..plant.parameters import PLANT_SCHEMA
 
@@ -64,4 +64,4 @@ def check(p: dict) -> None:
         raise ParamError(f'controller: {err}') from None
 
 
-SCHEMA = Schema('controller', list(PLANT_SCHEMA.params) + list(NODE.params), check)
+SCHEMA = PLANT_SCHEMA + Schema('controller', NODE.params, check)

@@ -20,7 +20,7 @@ import numpy as np
 from scipy import linalg, signal
 
 from ..qft.lti import from_num_den
-from ..stats import Counters
+from ..loop.stats import Counters
 from . import stepper as S
 from .antiwindup import observer_gain, poles_from_params
 from .discrete import DiscreteSS, tustin

@@ -1,7 +1,7 @@
 """The position controller's per-tick operations, compiled: reference shaper (clamp, rate and
 acceleration limit), prefilter F, controller G with observer-form anti-windup, speed clamp
 (eqs. 4.74-4.77). This module is the implementation: PositionController and ReferenceShaper
-(Python, one call per tick) and the closed-loop kernels of core.closed_loop (many ticks per
+(Python, one call per tick) and the closed-loop kernels of core.sim.closed_loop (many ticks per
 call) run these same functions on the same arrays, so both paths agree bit for bit.
 
 Scalars live in two vectors owned by the controller: constants ``k`` (K_*) and state ``c``

@@ -432,7 +432,7 @@ def flow_noise(Q, x, i_flow, i_gm, b_sigma, k, q_open, rest, count, n_open, fk, 
 
 @njit(cache=True)
 def safe_state(verdict: int) -> bool:
-    """The verdict the nodes answer with the safe state (core.safe_state): the position
+    """The verdict the nodes answer with the safe state (core.loop.safe_state): the position
     sensor is faulty."""
     return verdict == SENSOR
 

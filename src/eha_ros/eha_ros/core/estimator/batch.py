@@ -1,13 +1,13 @@
 """Batch closed loop in one process (DESIGN.md "three ways", 3): nonlinear plant, estimator,
-and the Table 3.8 position PID (core.pid) closing the loop on the estimate, as the controller
-does on the bench. Used by the tests and the benchmark."""
+and the Table 3.8 position PID (core.controller.pid) closing the loop on the estimate, as the
+controller does on the bench. Used by the tests and the benchmark."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..pid import PID
+from ..controller.pid import PID
 from ..plant import EhaPlant
 from .estimator import Estimator
 

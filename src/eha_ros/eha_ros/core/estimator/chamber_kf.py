@@ -277,7 +277,7 @@ class ChamberKF(MeasuredKF):
         else:
             pd = (self.x[2] - self.x[3]) if p_D is None else p_D
             w = omega if w_friction is None else w_friction
-            self.u[1] = friction_estimate(w, pd if self.friction_uses_pressure else None,
+            self.u[1] = friction_estimate(float(w), float(pd), bool(self.friction_uses_pressure),
                                           self.c.A_p, self.c.D_p, self.F_s, self.v_eps)
         self.mode = self.valve_mode()
         self.F, self.G = self.modes[self.mode]

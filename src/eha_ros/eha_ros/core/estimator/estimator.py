@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..plant.parameters import PlantParams
-from ..stats import Counters
+from ..loop.stats import Counters
 from . import adapt
 from . import fault_detector as fd
 from . import kernels
@@ -260,7 +260,7 @@ class Estimator:
             self.pd_filt = self.pd_meas
             self.omega_prev = self.w_fric = w
             self.started = True
-            self.detector.z_prev = position
+            self.detector.start(position)
             return self._result(0.0, 0.0, False, ','.join(reasons), 0)
         if ticks > 1:
             noise_level.gap(self.noise_s)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 NONE, JUMP, STUCK, DRIFT = 0, 1, 2, 3
@@ -39,20 +40,107 @@ def pressure_z(y, S, m) -> float:
     return out
 
 
+# constants (FK_*) and state (FS_*) of one detector: its own two arrays, which the estimator's
+# compiled path (core.estimator.stepper) reads and writes in place through slices
+(FK_JUMP, FK_JUMP_N, FK_STUCK_N, FK_STUCK_TOL, FK_DRIFT_K, FK_DRIFT_H, FK_DRIFT_N, FK_HOLD,
+ FK_JUMP_STEP, FK_JUMP_PVETO) = range(10)
+NFK = 10
+(FS_NJUMP, FS_NSAME, FS_NDRIFT, FS_GPOS, FS_GNEG, FS_ZPREV, FS_HAS_ZPREV, FS_YPREV,
+ FS_STEPPED, FS_CODE) = range(10)
+FS_HOLD = 10            # 3 entries: JUMP, STUCK, DRIFT (ticks the verdict stays reported)
+FS_DET = 13             # 3 entries: detections counted
+NFS = 16
+CODES = (JUMP, STUCK, DRIFT)
+
+
+@njit(cache=True)
+def _max(a, b):
+    """Python's max(a, b)."""
+    return b if b > a else a
+
+
+@njit(cache=True)
+def _report(k, s, now_jump, now_stuck, now_drift) -> int:
+    """Holds: an active condition is reported for FK_HOLD ticks after it clears; the code is
+    the first held of jump, stuck, drift."""
+    for i in range(3):
+        active = now_jump if i == 0 else (now_stuck if i == 1 else now_drift)
+        if active:
+            if s[FS_HOLD + i] == 0:
+                s[FS_DET + i] += 1
+            s[FS_HOLD + i] = k[FK_HOLD] + 1
+        elif s[FS_HOLD + i] > 0:
+            s[FS_HOLD + i] -= 1
+    code = NONE
+    for i in range(3):
+        if s[FS_HOLD + i] > 0:
+            code = i + 1          # JUMP, STUCK, DRIFT = 1, 2, 3
+            break
+    s[FS_CODE] = code
+    return code
+
+
+@njit(cache=True)
+def detect(k, s, z, innovation, S, pz) -> int:
+    """One position sample z (m) with its innovation (m) and innovation variance S (m^2); pz:
+    the largest normalised pressure innovation of the same update (0: none). Returns the code.
+
+    r = innovation / sqrt(S)
+    jump:  |r| > FK_JUMP for FK_JUMP_N samples, the run began with an innovation step
+           >= FK_JUMP_STEP and no pressure innovation >= FK_JUMP_PVETO
+    stuck: z within FK_STUCK_TOL of the previous z for FK_STUCK_N samples
+    drift: g+ = max(0, g+ + r - FK_DRIFT_K), g- = max(0, g- - r - FK_DRIFT_K) above FK_DRIFT_H
+           for FK_DRIFT_N samples"""
+    r = innovation / math.sqrt(S) if S > 0.0 else 0.0
+    s[FS_NJUMP] = s[FS_NJUMP] + 1 if abs(r) > k[FK_JUMP] else 0
+    # a jump starts with a one-sample innovation step, and the pressures stay quiet
+    # through the debounce (a load step's pressure innovation can come a sample late)
+    if s[FS_NJUMP] == 1:
+        s[FS_STEPPED] = 1.0 if abs(innovation - s[FS_YPREV]) >= k[FK_JUMP_STEP] else 0.0
+    if pz >= k[FK_JUMP_PVETO]:
+        s[FS_STEPPED] = 0.0
+    s[FS_YPREV] = innovation
+    same = s[FS_HAS_ZPREV] > 0.5 and abs(z - s[FS_ZPREV]) <= k[FK_STUCK_TOL]
+    s[FS_NSAME] = s[FS_NSAME] + 1 if same else 0
+    s[FS_ZPREV] = z
+    s[FS_HAS_ZPREV] = 1.0
+    s[FS_GPOS] = _max(0.0, s[FS_GPOS] + r - k[FK_DRIFT_K])
+    s[FS_GNEG] = _max(0.0, s[FS_GNEG] - r - k[FK_DRIFT_K])
+    s[FS_NDRIFT] = s[FS_NDRIFT] + 1 if _max(s[FS_GPOS], s[FS_GNEG]) > k[FK_DRIFT_H] else 0
+    # a jump moves the reading; identical readings behind a big innovation are a stuck
+    # sensor (reported when stuck_samples is reached), not a jump
+    now_jump = (s[FS_NJUMP] >= k[FK_JUMP_N] and s[FS_NSAME] < k[FK_JUMP_N]
+                and s[FS_STEPPED] > 0.5)
+    now_stuck = s[FS_NSAME] + 1 >= k[FK_STUCK_N]
+    now_drift = s[FS_NDRIFT] >= k[FK_DRIFT_N] and s[FS_NSAME] < k[FK_JUMP_N]
+    if now_jump:              # a jump is not a drift: restart the CUSUM behind it
+        s[FS_GPOS] = 0.0
+        s[FS_GNEG] = 0.0
+        s[FS_NDRIFT] = 0
+        now_drift = False
+    return _report(k, s, now_jump, now_stuck, now_drift)
+
+
+@njit(cache=True)
+def no_sample(k, s) -> int:
+    """A tick with no usable position (rejected or stale): holds count down."""
+    return _report(k, s, False, False, False)
+
+
 class FaultDetector:
-    """Feed one sample per tick with :meth:`update`; read the code from its return value."""
+    """Feed one sample per tick with :meth:`update`; read the code from its return value.
+    Constants and state are the arrays ``k`` and ``s`` (FK_*, FS_*) of :func:`detect`."""
 
     def __init__(self, Ts: float, jump_threshold: float = 8.0, jump_debounce: int = 3,
                  stuck_samples: int = 25, stuck_tolerance: float = 0.0, drift_k: float = 0.5,
                  drift_h: float = 150.0, drift_debounce: int = 5, hold_time: float = 0.5,
                  jump_step: float = 0.0, jump_pressure_veto: float = 1e300):
         self.Ts = Ts
-        self.jump_threshold, self.jump_debounce = jump_threshold, jump_debounce
-        self.stuck_samples, self.stuck_tolerance = stuck_samples, stuck_tolerance
-        self.drift_k, self.drift_h, self.drift_debounce = drift_k, drift_h, drift_debounce
-        self.hold_ticks = int(round(hold_time / Ts))
-        self.jump_step, self.jump_pressure_veto = jump_step, jump_pressure_veto
-        self.reset()
+        self.k = np.zeros(NFK)
+        self.k[:] = (jump_threshold, jump_debounce, stuck_samples, stuck_tolerance, drift_k,
+                     drift_h, drift_debounce, int(round(hold_time / Ts)), jump_step,
+                     jump_pressure_veto)
+        self.s = np.zeros(NFS)
 
     @classmethod
     def from_params(cls, p: dict, Ts: float) -> 'FaultDetector':
@@ -63,57 +151,27 @@ class FaultDetector:
                    p[f + 'jump_pressure_veto'])
 
     def reset(self):
-        self.n_jump = self.n_same = self.n_drift = 0
-        self.g_pos = self.g_neg = 0.0
-        self.z_prev = None
-        self.y_prev = 0.0
-        self.stepped = False       # the current run of large innovations began with a step
-        self.hold = {JUMP: 0, STUCK: 0, DRIFT: 0}
-        self.detections = {JUMP: 0, STUCK: 0, DRIFT: 0}
-        self.code = NONE
+        self.s[:] = 0.0
+
+    def start(self, z: float):
+        """The first sample: the reference of the stuck test, nothing judged."""
+        self.s[FS_ZPREV], self.s[FS_HAS_ZPREV] = z, 1.0
 
     def update(self, z: float, innovation: float, S: float, pz: float = 0.0) -> int:
-        """One position sample z (m) with its innovation (m) and innovation variance (m^2);
-        pz: the largest normalised pressure innovation of the same update (0: none)."""
-        r = innovation / math.sqrt(S) if S > 0.0 else 0.0
-        self.n_jump = self.n_jump + 1 if abs(r) > self.jump_threshold else 0
-        # a jump starts with a one-sample innovation step, and the pressures stay quiet
-        # through the debounce (a load step's pressure innovation can come a sample late)
-        if self.n_jump == 1:
-            self.stepped = abs(innovation - self.y_prev) >= self.jump_step
-        if pz >= self.jump_pressure_veto:
-            self.stepped = False
-        self.y_prev = innovation
-        same = self.z_prev is not None and abs(z - self.z_prev) <= self.stuck_tolerance
-        self.n_same = self.n_same + 1 if same else 0
-        self.z_prev = z
-        self.g_pos = max(0.0, self.g_pos + r - self.drift_k)
-        self.g_neg = max(0.0, self.g_neg - r - self.drift_k)
-        self.n_drift = self.n_drift + 1 if max(self.g_pos, self.g_neg) > self.drift_h else 0
-        # a jump moves the reading; identical readings behind a big innovation are a stuck
-        # sensor (reported when stuck_samples is reached), not a jump
-        now = {JUMP: (self.n_jump >= self.jump_debounce and self.n_same < self.jump_debounce
-                      and self.stepped),
-               STUCK: self.n_same + 1 >= self.stuck_samples,
-               DRIFT: self.n_drift >= self.drift_debounce and self.n_same < self.jump_debounce}
-        if now[JUMP]:              # a jump is not a drift: restart the CUSUM behind it
-            self.g_pos = self.g_neg = 0.0
-            self.n_drift = 0
-            now[DRIFT] = False
-        for code, active in now.items():
-            if active:
-                if self.hold[code] == 0:
-                    self.detections[code] += 1
-                self.hold[code] = self.hold_ticks + 1
-            elif self.hold[code] > 0:
-                self.hold[code] -= 1
-        self.code = next((c for c in (JUMP, STUCK, DRIFT) if self.hold[c] > 0), NONE)
-        return self.code
+        return detect(self.k, self.s, float(z), float(innovation), float(S), float(pz))
 
     def tick_without_sample(self) -> int:
-        """A tick with no usable position (rejected or stale): holds count down."""
-        for code in self.hold:
-            if self.hold[code] > 0:
-                self.hold[code] -= 1
-        self.code = next((c for c in (JUMP, STUCK, DRIFT) if self.hold[c] > 0), NONE)
-        return self.code
+        return no_sample(self.k, self.s)
+
+    @property
+    def code(self) -> int:
+        return int(self.s[FS_CODE])
+
+    @property
+    def hold_ticks(self) -> int:
+        return int(self.k[FK_HOLD])
+
+    @property
+    def detections(self) -> dict:
+        """Faults detected so far, by code."""
+        return {c: int(self.s[FS_DET + i]) for i, c in enumerate(CODES)}

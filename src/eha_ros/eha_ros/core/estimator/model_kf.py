@@ -42,6 +42,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.linalg import expm
 
 from . import kernels
@@ -89,23 +90,24 @@ def zoh(A: np.ndarray, B: np.ndarray, Ts: float):
     return E[:n, :n].copy(), E[:n, n:].copy()
 
 
-def friction_estimate(omega: float, p_D: float | None, A_p: float, D_p: float, F_s: float,
-                      v_eps: float) -> float:
+@njit(cache=True)
+def friction_estimate(omega, p_D, has_pd, A_p, D_p, F_s, v_eps):
     """Eq. 4.36, F_L = -sign(xdot) min(|p_D A_p|, F_s), made continuous for a sampled filter.
 
     sign(xdot) is taken from the pump flow, s = sat(D_p omega / (A_p v_eps)) (a hard sign
     switches F_L by 2 F_s within one Ts at every reversal and kicks the stiff p_D state);
-    p_D is the measured load pressure (None without pressure sensors: |F_L| = F_s). Where
-    |s| < 1 the friction blends into sticking, holding the pressure force:
+    p_D is the measured load pressure (has_pd False without pressure sensors: |F_L| = F_s).
+    Where |s| < 1 the friction blends into sticking, holding the pressure force:
     F_L = -s min(|A_p p_D|, F_s) - (1 - |s|) clip(A_p p_D, -F_s, F_s).
     """
     s = D_p * omega / (A_p * v_eps)
     s = 1.0 if s > 1.0 else (-1.0 if s < -1.0 else s)
-    if p_D is None:
+    if not has_pd:
         return -s * F_s
     force = A_p * p_D
     held = F_s if force > F_s else (-F_s if force < -F_s else force)
-    return -s * min(abs(force), F_s) - (1.0 - abs(s)) * held
+    a = abs(force)
+    return -s * (F_s if F_s < a else a) - (1.0 - abs(s)) * held
 
 
 LEAK_UNIT = 1e-12      # m^3/(s Pa): unit of the leakage-coefficient correction state
@@ -270,7 +272,8 @@ class ModelKF(MeasuredKF):
         friction takes (default omega; the estimator passes a low-pass of it)."""
         self.u[0] = omega
         w = omega if w_friction is None else w_friction
-        self.u[1] = friction_estimate(w, p_D if self.friction_uses_pressure else None,
+        has_pd = self.friction_uses_pressure and p_D is not None
+        self.u[1] = friction_estimate(float(w), float(p_D) if has_pd else 0.0, has_pd,
                                       self.h.A_p, self.h.D_p, self.F_s, self.v_eps)
         if self.i_leak is not None:
             pd = self.x[2] if p_D is None else p_D

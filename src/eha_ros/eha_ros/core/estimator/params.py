@@ -2,7 +2,7 @@
 config/plant.yaml (the model of eq. 4.35 is built from the same plant parameters)."""
 from __future__ import annotations
 
-from ..params import Param, Schema
+from ..config.params import Param, Schema
 from ..plant.parameters import PLANT_SCHEMA
 
 BAR = 1.0e5
@@ -226,4 +226,4 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'node.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
 ])
 
-SCHEMA = Schema('estimator', list(PLANT_SCHEMA.params) + list(ESTIMATOR.params))
+SCHEMA = PLANT_SCHEMA + ESTIMATOR

@@ -1,4 +1,4 @@
-"""Estimator.update as one compiled call, for closed-loop kernels (core.closed_loop).
+"""Estimator.update as one compiled call, for closed-loop kernels (core.sim.closed_loop).
 
 Covers the common path only: started, measurement valid (else counters and reasons: Python),
 one tick since the previous state, not isolating, no Chinniah pair. Same operations in the
@@ -18,54 +18,42 @@ from . import adapt
 from . import fault_detector as fd
 from . import noise_level
 from .kernels import predict, update_gated, workspace_size
+from .model_kf import friction_estimate
 
 drop_stale(__file__)
 
 # constants
-K_XMAX, K_PMIN, K_PMAX, K_WMAX, K_ALPHA_PD = 0, 1, 2, 3, 4
-K_MODEL, K_USE_P, K_FRIC_P, K_ILEAK, K_NLIN = 5, 6, 7, 8, 9
-K_AP, K_DP, K_FS, K_VEPS, K_ISOLATE = 10, 11, 12, 13, 14
-K_JUMP, K_JUMP_N, K_STUCK_N, K_STUCK_TOL, K_DRIFT_K, K_DRIFT_H, K_DRIFT_N, K_HOLD = \
-    15, 16, 17, 18, 19, 20, 21, 22
-K_CHAMBERS, K_PC, K_ALPHA_WF = 23, 24, 25
-K_CX, K_CR, K_PACC, K_ILAM, K_IDEL, K_LAMLO, K_LAMHI, K_DELLO, K_DELHI, K_IGM, K_BMAX = \
-    26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36
-K_IKAP, K_KAPLO, K_KAPHI, K_CTS = 37, 38, 39, 40
-K_JUMP_STEP, K_JUMP_PVETO = 41, 42
-K_IFROZEN, K_GATE = 43, 44
-K_ILOAD, K_QLOAD, K_QLOADJ, K_LOADZ, K_ALPHA_DP = 45, 46, 47, 48, 49
-K_QX, K_QXD, K_BDIS, K_PEXC = 50, 51, 52, 53
-K_MON = 54             # adapt.NMK entries: the consistency monitor's constants
-K_STRIBECK, K_IPHI, K_PHILO, K_PHIHI, K_IEPS, K_EPSLO, K_EPSHI = 58, 59, 60, 61, 62, 63, 64
-K_IMOVED, K_MOVEDZ = 65, 66
-K_FK = 67              # adapt.NFK entries: the friction model's constants
+(K_XMAX, K_PMIN, K_PMAX, K_WMAX, K_ALPHA_PD, K_MODEL, K_USE_P, K_FRIC_P, K_ILEAK, K_NLIN,
+ K_AP, K_DP, K_FS, K_VEPS, K_ISOLATE, K_CHAMBERS, K_PC, K_ALPHA_WF,
+ K_CX, K_CR, K_PACC, K_ILAM, K_IDEL, K_LAMLO, K_LAMHI, K_DELLO, K_DELHI, K_IGM, K_BMAX,
+ K_IKAP, K_KAPLO, K_KAPHI, K_CTS, K_IFROZEN, K_GATE,
+ K_ILOAD, K_QLOAD, K_QLOADJ, K_LOADZ, K_ALPHA_DP, K_QX, K_QXD, K_BDIS, K_PEXC) = range(44)
+K_MON = 44             # adapt.NMK entries: the consistency monitor's constants
+(K_STRIBECK, K_IPHI, K_PHILO, K_PHIHI, K_IEPS, K_EPSLO, K_EPSHI, K_IMOVED,
+ K_MOVEDZ) = range(K_MON + adapt.NMK, K_MON + adapt.NMK + 9)
+K_FK = K_MOVEDZ + 1    # adapt.NFK entries: the friction model's constants
 K_NADAPT = K_FK + adapt.NFK     # 1: the sensors' noise level is measured (noise_level)
 K_NL = K_NADAPT + 1    # noise_level.NNK entries: its constants
 K_IFLOW = K_NL + noise_level.NNK
 K_QFLOW, K_FLOWK, K_FLOWN, K_FLOWDP, K_FLOWSH, K_FLOWREP = (K_IFLOW + i for i in range(1, 7))
 K_OFFG, K_QXO = K_FLOWREP + 1, K_FLOWREP + 2     # adapt.offset_noise: gate, position noise
 K_OFFA = K_QXO + 1     # 3 entries: its alphas (b, the pressure difference's mean, variance)
-NK = K_OFFA + 3
-assert K_MON + adapt.NMK == K_STRIBECK
+K_FD = K_OFFA + 3      # fd.NFK entries: the fault detector's constants
+NK = K_FD + fd.NFK
 # state
-E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES = 0, 1, 2, 3
-E_NJUMP, E_NSAME, E_NDRIFT, E_GPOS, E_GNEG, E_ZPREV, E_HAS_ZPREV = 4, 5, 6, 7, 8, 9, 10
-E_HOLD = 11            # 3 entries: JUMP, STUCK, DRIFT
-E_DET = 14             # 3 entries
-E_CODE = 17
-E_MODE = 18            # check-valve state of the chamber filter
-E_WFRIC = 19           # low-passed pump speed (friction sign)
-E_EDGE = 20            # adaptive states on a bound after the last update
-E_PLAST = 21           # 4 entries: chamber filter's adapt.pressure_increments state
-E_YPREV, E_STEPPED = 25, 26   # fault detector: last innovation, run began with a step
-E_CLIPPED = 27         # chamber filter: updates in a row that clipped a parameter
-E_MON = 28             # adapt.NMS entries: the consistency monitor's state
+E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES, E_MODE, E_WFRIC, E_EDGE = range(7)
+# E_MODE: check-valve state of the chamber filter; E_WFRIC: low-passed pump speed (friction
+# sign); E_EDGE: adaptive states on a bound after the last update
+E_PLAST = 7            # 4 entries: chamber filter's adapt.pressure_increments state
+E_CLIPPED = 11         # chamber filter: updates in a row that clipped a parameter
+E_MON = 12             # adapt.NMS entries: the consistency monitor's state
 E_FS = E_MON + adapt.NMS   # adapt.NFS entries: the friction model's state
 E_NL = E_FS + adapt.NFS    # noise_level.NNS entries: the noise level's state
 E_FLOWN = E_NL + noise_level.NNS   # adapt.NFLOW entries: adapt.flow_noise's state
 E_OFFS = E_FLOWN + adapt.NFLOW    # adapt.NOFS entries: adapt.offset_noise's state
-NE = E_OFFS + adapt.NOFS
-CODES = (fd.JUMP, fd.STUCK, fd.DRIFT)
+E_FD = E_OFFS + adapt.NOFS        # fd.NFS entries: the fault detector's state
+NE = E_FD + fd.NFS
+E_CODE = E_FD + fd.FS_CODE
 
 
 def supported(est) -> bool:
@@ -127,22 +115,11 @@ def pack(est):
     k[K_OFFG], k[K_QXO] = est.offset_gate, est.q_x_offset
     k[K_OFFA:K_OFFA + 3] = est.offset_alpha
     e[E_OFFS:E_OFFS + adapt.NOFS] = est.offset_s
-    k[K_JUMP], k[K_JUMP_N] = d.jump_threshold, d.jump_debounce
-    k[K_STUCK_N], k[K_STUCK_TOL] = d.stuck_samples, d.stuck_tolerance
-    k[K_DRIFT_K], k[K_DRIFT_H], k[K_DRIFT_N] = d.drift_k, d.drift_h, d.drift_debounce
-    k[K_HOLD] = d.hold_ticks
-    k[K_JUMP_STEP], k[K_JUMP_PVETO] = d.jump_step, d.jump_pressure_veto
-    e[E_YPREV], e[E_STEPPED] = d.y_prev, d.stepped
+    k[K_FD:K_FD + fd.NFK] = d.k
+    e[E_FD:E_FD + fd.NFS] = d.s
     e[E_OMEGA], e[E_PD_MEAS], e[E_PD_FILT] = est.omega_prev, est.pd_meas, est.pd_filt
     e[E_WFRIC] = est.w_fric
     e[E_UPDATES] = est.updates
-    e[E_NJUMP], e[E_NSAME], e[E_NDRIFT] = d.n_jump, d.n_same, d.n_drift
-    e[E_GPOS], e[E_GNEG] = d.g_pos, d.g_neg
-    e[E_HAS_ZPREV] = d.z_prev is not None
-    e[E_ZPREV] = d.z_prev if d.z_prev is not None else 0.0
-    for i, c in enumerate(CODES):
-        e[E_HOLD + i], e[E_DET + i] = d.hold[c], d.detections[c]
-    e[E_CODE] = d.code
     F, G = kf.F, kf.G
     Fm, Gm = np.zeros((1, 1)), np.zeros((1, 1))
     if est.chambers:
@@ -168,17 +145,10 @@ def pack(est):
 
 
 def unpack(est, e) -> None:
-    d = est.detector
     est.omega_prev, est.pd_meas, est.pd_filt, est.w_fric = (
         float(e[i]) for i in (E_OMEGA, E_PD_MEAS, E_PD_FILT, E_WFRIC))
     est.updates = int(e[E_UPDATES])
-    d.n_jump, d.n_same, d.n_drift = int(e[E_NJUMP]), int(e[E_NSAME]), int(e[E_NDRIFT])
-    d.g_pos, d.g_neg = float(e[E_GPOS]), float(e[E_GNEG])
-    d.z_prev = float(e[E_ZPREV]) if e[E_HAS_ZPREV] else None
-    for i, c in enumerate(CODES):
-        d.hold[c], d.detections[c] = int(e[E_HOLD + i]), int(e[E_DET + i])
-    d.code = int(e[E_CODE])
-    d.y_prev, d.stepped = float(e[E_YPREV]), bool(e[E_STEPPED] > 0.5)
+    est.detector.s[:] = e[E_FD:E_FD + fd.NFS]
     est.monitor_s[:] = e[E_MON:E_MON + adapt.NMS]
     est.noise_s[:] = e[E_NL:E_NL + noise_level.NNS]
     est.flow_s[:] = e[E_FLOWN:E_FLOWN + adapt.NFLOW]
@@ -195,7 +165,7 @@ def unpack(est, e) -> None:
 
 @njit(cache=True)
 def position_fault(e) -> bool:
-    """This tick's consistency verdict calls for the safe state (core.safe_state)."""
+    """This tick's consistency verdict calls for the safe state (core.loop.safe_state)."""
     return adapt.safe_state(int(e[E_MON + adapt.MS_VERDICT]))
 
 
@@ -215,67 +185,6 @@ def ready(k, e, position, w, pa, pb) -> bool:
 def pressure_ok(k, pa, pb) -> bool:
     return (math.isfinite(pa) and k[K_PMIN] <= pa <= k[K_PMAX] and
             math.isfinite(pb) and k[K_PMIN] <= pb <= k[K_PMAX])
-
-
-@njit(cache=True)
-def friction_estimate(omega, p_D, has_pd, A_p, D_p, F_s, v_eps):
-    """model_kf.friction_estimate (eq. 4.36 made continuous), same operations."""
-    s = D_p * omega / (A_p * v_eps)
-    s = 1.0 if s > 1.0 else (-1.0 if s < -1.0 else s)
-    if not has_pd:
-        return -s * F_s
-    force = A_p * p_D
-    held = F_s if force > F_s else (-F_s if force < -F_s else force)
-    a = abs(force)
-    return -s * (F_s if F_s < a else a) - (1.0 - abs(s)) * held
-
-
-@njit(cache=True)
-def pymax(a, b):
-    """Python's max(a, b)."""
-    return b if b > a else a
-
-
-@njit(cache=True)
-def detect(k, e, z, innovation, S, pz) -> None:
-    """FaultDetector.update (jump, stuck, drift with hold), same operations."""
-    r = innovation / math.sqrt(S) if S > 0.0 else 0.0
-    e[E_NJUMP] = e[E_NJUMP] + 1 if abs(r) > k[K_JUMP] else 0
-    if e[E_NJUMP] == 1:
-        e[E_STEPPED] = 1.0 if abs(innovation - e[E_YPREV]) >= k[K_JUMP_STEP] else 0.0
-    if pz >= k[K_JUMP_PVETO]:
-        e[E_STEPPED] = 0.0
-    e[E_YPREV] = innovation
-    same = e[E_HAS_ZPREV] > 0.5 and abs(z - e[E_ZPREV]) <= k[K_STUCK_TOL]
-    e[E_NSAME] = e[E_NSAME] + 1 if same else 0
-    e[E_ZPREV] = z
-    e[E_HAS_ZPREV] = 1.0
-    e[E_GPOS] = pymax(0.0, e[E_GPOS] + r - k[K_DRIFT_K])
-    e[E_GNEG] = pymax(0.0, e[E_GNEG] - r - k[K_DRIFT_K])
-    e[E_NDRIFT] = e[E_NDRIFT] + 1 if pymax(e[E_GPOS], e[E_GNEG]) > k[K_DRIFT_H] else 0
-    now_jump = (e[E_NJUMP] >= k[K_JUMP_N] and e[E_NSAME] < k[K_JUMP_N]
-                and e[E_STEPPED] > 0.5)
-    now_stuck = e[E_NSAME] + 1 >= k[K_STUCK_N]
-    now_drift = e[E_NDRIFT] >= k[K_DRIFT_N] and e[E_NSAME] < k[K_JUMP_N]
-    if now_jump:
-        e[E_GPOS] = 0.0
-        e[E_GNEG] = 0.0
-        e[E_NDRIFT] = 0
-        now_drift = False
-    code = fd.NONE
-    for i in range(3):
-        active = now_jump if i == 0 else (now_stuck if i == 1 else now_drift)
-        if active:
-            if e[E_HOLD + i] == 0:
-                e[E_DET + i] += 1
-            e[E_HOLD + i] = k[K_HOLD] + 1
-        elif e[E_HOLD + i] > 0:
-            e[E_HOLD + i] -= 1
-    for i in range(3):
-        if e[E_HOLD + i] > 0:
-            code = i + 1          # JUMP, STUCK, DRIFT = 1, 2, 3
-            break
-    e[E_CODE] = code
 
 
 @njit(cache=True)
@@ -368,7 +277,7 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
                                   k[K_BMAX],
                                   e[E_CLIPPED:E_CLIPPED + 1], adapt.EDGE_TICKS)
     e[E_UPDATES] += 1
-    detect(k, e, position, innov, s00, pz)
+    fd.detect(k[K_FD:K_FD + fd.NFK], e[E_FD:E_FD + fd.NFS], position, innov, s00, pz)
     if k[K_CHAMBERS] > 0.5:
         adapt.maneuver(Q, int(k[K_ILOAD]), pz, k[K_LOADZ],
                        k[K_QLOAD] + e[E_FS + adapt.FS_Q], k[K_QLOADJ])

@@ -14,8 +14,8 @@ import time
 
 from ..bridge.link import AdsLink, LinkError
 from ..bridge.symbols import int_range, load_symbol_map, resolve_path
-from ..params import default_config_dir
-from ..stats import Counters
+from ..config.params import default_config_dir
+from ..loop.stats import Counters
 from .interface import Hardware, HardwareError, Reading
 from .staleness import Staleness
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 
-from ..stats import Counters
+from ..loop.stats import Counters
 
 
 class CommandGate:

@@ -2,11 +2,9 @@
 (plant_sim: ``sim_node``, hardware_bridge: ``bridge``); only the defaults differ."""
 from __future__ import annotations
 
-from ..params import Param
+from ..config.params import Param
 
 AUTOSTART = ('unconfigured', 'inactive', 'active')
-# executable -> the prefix of its loop parameters
-LOOP_PREFIX = {'plant_sim': 'sim_node', 'hardware_bridge': 'bridge'}
 
 
 def loop_params(prefix: str, *, command_timeout: float, autostart: str,

@@ -1,7 +1,7 @@
 """Servo drive (AX5118): velocity PI + low-pass (eq. 4.65/4.71) and current PI (eq. 3.34)."""
 import math
-from collections import deque
 
+import numpy as np
 from numba import njit
 
 from . import layout as L
@@ -85,19 +85,35 @@ def disable(S, b):
     S[b + L.C_VD] = 0.0
 
 
-class SpeedDelay:
-    """Drive delay on the speed reference: FIFO of whole ticks (0 = none)."""
+@njit(cache=True)
+def delay_push(ring, head, n, w_ref):
+    """Drive delay FIFO of n whole ticks on a ring (head[0]: index of the oldest entry):
+    insert this tick's reference, return the one applied now (n = 0: itself)."""
+    if n == 0:
+        return w_ref
+    h = int(head[0])
+    w = ring[h]
+    ring[h] = w_ref
+    head[0] = (h + 1) % n
+    return w
 
-    def __init__(self, ticks: int):
+
+class SpeedDelay:
+    """Drive delay on the speed reference: FIFO of whole ticks (0 = none), :func:`delay_push`
+    on its own ring (the compiled plant step shares it)."""
+
+    def __init__(self, ticks: int, head=None):
+        """head: a one-element array for the ring index (the plant's aux vector); its own
+        when not given."""
         self.ticks = ticks
-        self.fifo = deque([0.0] * ticks)
+        self.ring = np.zeros(max(ticks, 1))
+        self.head = head if head is not None else np.zeros(1)
+        self.head[0] = 0.0
 
     def push(self, w_ref: float) -> float:
         """Insert this tick's reference, return the one applied now."""
-        if self.ticks == 0:
-            return w_ref
-        self.fifo.append(w_ref)
-        return self.fifo.popleft()
+        return delay_push(self.ring, self.head, self.ticks, float(w_ref))
 
     def reset(self):
-        self.fifo = deque([0.0] * self.ticks)
+        self.ring[:] = 0.0
+        self.head[0] = 0.0

@@ -4,7 +4,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+from numba import njit
+
+from ..jit_cache import drop_stale
 from . import layout as L
+
+drop_stale(__file__)
 
 FAULTS = {
     'msp_noise': 'extra white noise on the position sensor, magnitude = sigma (m)',
@@ -16,6 +22,56 @@ FAULTS = {
     'pressure_sensor': 'bias magnitude (Pa) on both pressure readings; NaN = both stuck',
 }
 CLEAR = 'clear'         # not a fault: removes every active fault (channel, magnitude ignored)
+# numeric codes of the compiled path: the position in FAULTS
+FAULT_CODES = {name: i for i, name in enumerate(FAULTS)}
+(FC_MSP_NOISE, FC_MSP_STUCK, FC_MSP_BIAS, FC_MSP_DRIFT, FC_MOTOR_FAIL, FC_PUMP_LEAKAGE,
+ FC_PRESSURE_SENSOR) = (FAULT_CODES[n] for n in (
+    'msp_noise', 'msp_stuck', 'msp_bias', 'msp_drift', 'motor_fail', 'pump_leakage',
+    'pressure_sensor'))
+# fault table rows: code, channel, magnitude, t_start, t_end; one per (name, channel) at most
+F_CODE, F_CH, F_MAG, F_T0, F_T1 = range(5)
+MAX_FAULTS = 2 * len(FAULTS)
+
+
+@njit(cache=True)
+def expiring(table, n, t) -> bool:
+    """One of the first n faults of the table ends at or before t."""
+    for i in range(n):
+        if table[i, F_T1] <= t + 1e-12:
+            return True
+    return False
+
+
+@njit(cache=True)
+def apply_faults(t, U, table, n) -> None:
+    """The effects of the first n rows of the fault table into the input vector U, in order."""
+    U[L.U_FAIL0] = 0.0
+    U[L.U_FAIL1] = 0.0
+    U[L.U_LEAK0] = 1.0
+    U[L.U_LEAK1] = 1.0
+    for j in range(L.U_FX_SIGMA, L.U_FP_STUCK + 1):
+        U[j] = 0.0
+    for i in range(n):
+        code = int(table[i, F_CODE])
+        ch = int(table[i, F_CH])
+        mag = table[i, F_MAG]
+        if code == FC_MOTOR_FAIL:
+            U[L.U_FAIL0 + ch] = 1.0
+        elif code == FC_PUMP_LEAKAGE:
+            U[L.U_LEAK0 + ch] = mag
+        elif code == FC_MSP_NOISE:
+            U[L.U_FX_SIGMA] = mag
+        elif code == FC_MSP_BIAS:
+            U[L.U_FX_BIAS] += mag
+        elif code == FC_MSP_DRIFT:
+            U[L.U_FX_BIAS] += mag * (t - table[i, F_T0])
+        elif code == FC_MSP_STUCK:
+            U[L.U_FX_STUCK] = 1.0
+        elif code == FC_PRESSURE_SENSOR:
+            if math.isnan(mag):
+                U[L.U_FP_STUCK] = 1.0
+            else:
+                U[L.U_FP_BIAS] = mag
 
 
 @dataclass
@@ -28,12 +84,18 @@ class Fault:
 
 
 class FaultSet:
-    """Active faults; writes their effect into the input vector U and sensor fault vector."""
+    """Active faults; writes their effect into the input vector U and sensor fault vector.
+    ``table`` (rows F_*, the first ``n`` in use, in the order of ``active``) is what
+    :func:`apply_faults` reads, here and in the compiled plant step."""
 
-    def __init__(self, position_range: float = math.inf):
+    def __init__(self, position_range: float = math.inf, count=None):
         """position_range (m): the position sensor's measuring range (the stroke), the largest
-        |magnitude| of msp_bias, msp_noise and msp_drift (per second)."""
+        |magnitude| of msp_bias, msp_noise and msp_drift (per second). count: a one-element
+        array that mirrors ``n`` for the compiled step (the plant's aux vector)."""
         self.active: dict[tuple[str, int], Fault] = {}
+        self.table = np.zeros((MAX_FAULTS, 5))
+        self.n = 0
+        self._count = count if count is not None else np.zeros(1)
         self.limits = dict.fromkeys(('msp_bias', 'msp_noise', 'msp_drift'), position_range)
 
     def inject(self, name, channel, magnitude, duration, t) -> tuple[bool, str]:
@@ -69,34 +131,32 @@ class FaultSet:
             channel = 0        # one position sensor and one pair of pressure sensors
         t_end = math.inf if duration == 0 else t + duration
         self.active[(name, channel)] = Fault(name, channel, magnitude, t, t_end)
+        self._tabulate()
         span = 'permanent' if duration == 0 else f'for {duration:g} s'
         return True, f'fault {name} on channel {channel} magnitude {magnitude:g} {span}'
 
     def clear(self):
         self.active.clear()
+        self._tabulate()
+
+    def _tabulate(self):
+        for i, f in enumerate(self.active.values()):
+            self.table[i] = (FAULT_CODES[f.name], f.channel, f.magnitude, f.t_start, f.t_end)
+        self.n = len(self.active)
+        self._count[0] = self.n
+
+    def due(self, t) -> bool:
+        """A fault ends at or before t (apply deletes it)."""
+        return expiring(self.table, self.n, float(t))
+
+    def expire(self, t) -> None:
+        """Delete the faults ending at or before t."""
+        if self.due(t):
+            for key in [k for k, f in self.active.items() if f.t_end <= t + 1e-12]:
+                del self.active[key]
+            self._tabulate()
 
     def apply(self, t, U) -> None:
         """Expire faults ending at or before t; write the remaining ones' effects into U."""
-        for key in [k for k, f in self.active.items() if f.t_end <= t + 1e-12]:
-            del self.active[key]
-        U[L.U_FAIL0] = U[L.U_FAIL1] = 0.0
-        U[L.U_LEAK0] = U[L.U_LEAK1] = 1.0
-        U[L.U_FX_SIGMA:L.U_FP_STUCK + 1] = 0.0
-        for f in self.active.values():
-            if f.name == 'motor_fail':
-                U[L.U_FAIL0 + f.channel] = 1.0
-            elif f.name == 'pump_leakage':
-                U[L.U_LEAK0 + f.channel] = f.magnitude
-            elif f.name == 'msp_noise':
-                U[L.U_FX_SIGMA] = f.magnitude
-            elif f.name == 'msp_bias':
-                U[L.U_FX_BIAS] += f.magnitude
-            elif f.name == 'msp_drift':
-                U[L.U_FX_BIAS] += f.magnitude * (t - f.t_start)
-            elif f.name == 'msp_stuck':
-                U[L.U_FX_STUCK] = 1.0
-            elif f.name == 'pressure_sensor':
-                if math.isnan(f.magnitude):
-                    U[L.U_FP_STUCK] = 1.0
-                else:
-                    U[L.U_FP_BIAS] = f.magnitude
+        self.expire(t)
+        apply_faults(float(t), U, self.table, self.n)

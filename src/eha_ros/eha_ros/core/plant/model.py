@@ -12,10 +12,10 @@ import numpy as np
 
 from . import layout as L
 from . import sensors as SN
+from . import stepper as PS
 from .accumulator import oil_volume
 from .drive import SpeedDelay
 from .faults import FaultSet
-from .integrator import tick
 from .parameters import PlantParams, leakage_table, pack
 
 
@@ -54,6 +54,17 @@ class Truth:
     bypass_fraction: float
 
 
+def _aux_flag(index: int, doc: str) -> property:
+    """A bool attribute kept in the plant's aux vector (1.0 / 0.0), where the compiled step
+    reads and writes it."""
+    def get(self) -> bool:
+        return bool(self._aux[index] > 0.5)
+
+    def put(self, value: bool) -> None:
+        self._aux[index] = 1.0 if value else 0.0
+    return property(get, put, doc=doc)
+
+
 class EhaPlant:
     """EHA plant: ``step(omega_ref, load_force)`` advances one tick Ts.
 
@@ -69,7 +80,10 @@ class EhaPlant:
         self._nsub = self.p.substeps
         self._T = leakage_table(self.p)
         self._seed = seed
-        self.faults = FaultSet(position_range=self.p.stroke)
+        # the scalars the compiled step advances (stepper.A_*): time, noise row, flags, the
+        # delay ring's head, the fault count; read through the properties below
+        self._aux = np.zeros(PS.NAUX)
+        self.faults = FaultSet(self.p.stroke, self._aux[PS.A_NFAULT:PS.A_NFAULT + 1])
         self.reset()
 
     # ------------------------------------------------------------------ set-up
@@ -79,7 +93,8 @@ class EhaPlant:
         if not math.isfinite(position) or abs(position) > self.p.x_stop:
             raise ValueError(f'reset position {position!r} m: expected within +-{self.p.x_stop}')
         p = self.p
-        self.t = 0.0
+        self._aux[:] = 0.0
+        self._aux[PS.A_TS] = self.Ts
         self.S = np.zeros(L.NSTATE)
         self.S[L.S_X] = position
         self.S[L.S_PACC] = p.acc_p_init
@@ -90,13 +105,28 @@ class EhaPlant:
         self.active_channel = 0
         self.select(0, (True, False), (True, False), False)
         self.S[L.S_CH + L.C_FV] = 1.0           # valves 0 already open at start
-        self._delay = SpeedDelay(p.delay_ticks)
-        self._noise = SN.NoiseSource(self._seed)
+        self._delay = SpeedDelay(p.delay_ticks, self._aux[PS.A_HEAD:PS.A_HEAD + 1])
+        self._aux[PS.A_NDELAY] = p.delay_ticks
+        self._noise = SN.NoiseSource(self._seed, self._aux[PS.A_NOISE_K:PS.A_NOISE_K + 1])
         self._meas = np.zeros(L.NM)
         self._valid = True
         self.faults.clear()
         self._faulted = False
         self._sample()
+
+    @property
+    def t(self) -> float:
+        """Plant time (s): ticks stepped times Ts."""
+        return float(self._aux[PS.A_T])
+
+    @t.setter
+    def t(self, value: float) -> None:
+        self._aux[PS.A_T] = value
+
+    _valid = _aux_flag(PS.A_VALID, 'Every tick so far finite (a non-finite one is undone and '
+                                   'marks the state).')
+    _faulted = _aux_flag(PS.A_FAULTED, 'Fault effects were written into U at the last tick (to '
+                                       'be cleared once).')
 
     def select(self, channel: int, drive_enable=(True, False), valve_open=(True, False),
                bypass_open: bool = False) -> None:
@@ -122,16 +152,14 @@ class EhaPlant:
         if not (math.isfinite(omega_ref) and math.isfinite(load_force)):
             raise ValueError(f'non-finite plant input omega_ref={omega_ref!r}, '
                              f'load_force={load_force!r}: expected finite numbers')
-        self.U[L.U_WREF] = self._delay.push(omega_ref)
-        self.U[L.U_FL] = load_force
-        if self.faults.active or self._faulted:
-            self.faults.apply(self.t, self.U)
-            self._faulted = bool(self.faults.active)
-        row = self._noise.next_index()
-        if not tick(self.S, self._P, self.U, self._T, self._nsub, self._noise.block, row,
-                    self._meas):
-            self._valid = False         # state restored by tick(); never keeps NaN
-        self.t += self.Ts
+        faults = self.faults
+        if faults.n:
+            faults.expire(self.t)
+        self._noise.refill()
+        # stepper.step: the drive delay, the fault effects, this tick's noise row, the tick
+        # (a non-finite one is undone and marks the state not valid), t += Ts
+        PS.step(self.S, self._P, self.U, self._T, self._nsub, self._noise.block, self._meas,
+                self._aux, self._delay.ring, faults.table, omega_ref, load_force)
 
     def run(self, omega_ref, load_force=None) -> np.ndarray:
         """Batch helper: step through arrays of inputs; returns the true positions."""

@@ -18,11 +18,11 @@ Decided choices (thesis inconsistencies, see DESIGN.md):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import make_dataclass
 
 import numpy as np
 
-from ..params import Param, ParamError, Schema
+from ..config.params import Param, ParamError, Schema
 from . import layout as L
 
 RPM = 2.0 * math.pi / 60.0
@@ -50,6 +50,42 @@ def _synthetic_eta_table():
 _ETA_W, _ETA_P, _ETA = _synthetic_eta_table()
 
 P = 'plant.'
+
+
+def check(v: dict) -> None:
+    """Ts / drive.period an integer that divides sim.substeps; len(pump.eta_v) =
+    len(eta_v_omega) len(eta_v_pd), both grids strictly increasing; friction.F_s >= F_c
+    (eq. 3.33); drive.delay a whole number of ticks; accumulator.p_init above P_0."""
+    ts, period, substeps = v[P + 'sim.Ts'], v[P + 'drive.period'], v[P + 'sim.substeps']
+    ratio = ts / period
+    if abs(ratio - round(ratio)) > 1e-9 or substeps % int(round(ratio)):
+        raise ParamError(f'plant.sim.substeps = {substeps} with plant.drive.period = '
+                         f'{period:g}: expected Ts/period an integer that divides substeps',
+                         P + 'sim.substeps')
+    n_w, n_p, n = (len(v[P + 'pump.eta_v_omega']), len(v[P + 'pump.eta_v_pd']),
+                   len(v[P + 'pump.eta_v']))
+    if n != n_w * n_p:
+        raise ParamError(f'plant.pump.eta_v has {n} values: expected '
+                         f'len(eta_v_omega)*len(eta_v_pd) = {n_w * n_p}', P + 'pump.eta_v')
+    for key in ('pump.eta_v_omega', 'pump.eta_v_pd'):
+        arr = list(v[P + key])
+        if any(b <= a for a, b in zip(arr, arr[1:])):
+            raise ParamError(f'plant.{key} = {arr}: expected strictly increasing values', P + key)
+    f_s, f_c = v[P + 'friction.F_s'], v[P + 'friction.F_c']
+    if f_s < f_c:
+        raise ParamError(f'plant.friction.F_s = {f_s}: expected >= plant.friction.F_c = {f_c} '
+                         f'(static friction at least the Coulomb level, eq. 3.33)',
+                         P + 'friction.F_s')
+    delay = v[P + 'drive.delay']
+    if abs(delay / ts - round(delay / ts)) > 1e-6:
+        raise ParamError(f'plant.drive.delay = {delay}: expected a whole number of ticks of '
+                         f'{ts} s', P + 'drive.delay')
+    p_init, p_0 = v[P + 'accumulator.p_init'], v[P + 'accumulator.P_0']
+    if p_init <= p_0:
+        raise ParamError(f'plant.accumulator.p_init = {p_init}: expected above the pre-charge '
+                         f'plant.accumulator.P_0 = {p_0}', P + 'accumulator.p_init')
+
+
 PLANT_SCHEMA = Schema('plant_sim', [
     # numerics
     Param(P + 'sim.Ts', 'float', 's', 1.0e-3, 1.0e-4, 1.0e-2, doc='tick (sample) period'),
@@ -74,7 +110,8 @@ PLANT_SCHEMA = Schema('plant_sim', [
     Param(P + 'cylinder.stop_k', 'float', 'N/m', 1.0e8, 1e4, 1e11, doc='end-stop stiffness'),
     Param(P + 'cylinder.stop_c', 'float', 'N/(m/s)', 2.0e4, 0.0, 1e8, doc='end-stop damping'),
     # friction, Table 3.7, eq. 3.33
-    Param(P + 'friction.model', 'str', '', 'stribeck', choices=('stribeck', 'viscous', 'none')),
+    Param(P + 'friction.model', 'str', '', 'stribeck', choices=('stribeck', 'viscous', 'none'),
+          field='friction_model'),
     Param(P + 'friction.F_c', 'float', 'N', 450.0, 0.0, 1e5),
     Param(P + 'friction.F_s', 'float', 'N', 800.0, 0.0, 1e5),
     Param(P + 'friction.v_s', 'float', 'm/s', 0.03, 1e-5, 10.0),
@@ -90,7 +127,7 @@ PLANT_SCHEMA = Schema('plant_sim', [
     Param(P + 'pump.eta_v', 'float[]', '', _ETA, 0.0, 1.0, min_len=4,
           doc='row-major [omega][p_D] volumetric efficiency (synthetic default)'),
     # motor, eq. 3.10-3.14
-    Param(P + 'motor.model', 'str', '', 'dc', choices=('dc', 'dq')),
+    Param(P + 'motor.model', 'str', '', 'dc', choices=('dc', 'dq'), field='motor_model'),
     Param(P + 'motor.R', 'float', 'ohm', 0.45, 1e-4, 100.0),
     Param(P + 'motor.L', 'float', 'H', 2.1e-3, 1e-6, 1.0),
     Param(P + 'motor.k_T', 'float', 'Nm/A', min=1e-3, max=100.0),
@@ -101,7 +138,8 @@ PLANT_SCHEMA = Schema('plant_sim', [
     Param(P + 'motor.L_d', 'float', 'H', 2.1e-3, 1e-6, 1.0),
     Param(P + 'motor.L_q', 'float', 'H', 2.1e-3, 1e-6, 1.0),
     # drive, eq. 3.34, 4.65, 4.71
-    Param(P + 'drive.period', 'float', 's', 62.5e-6, 1e-6, 1e-3, doc='current/speed loop period'),
+    Param(P + 'drive.period', 'float', 's', 62.5e-6, 1e-6, 1e-3, doc='current/speed loop period',
+          field='drive_period'),
     Param(P + 'drive.Kp_i', 'float', 'V/A', 11.3, 0.0, 1e4),
     Param(P + 'drive.Ki_i', 'float', 'V/(A s)', 14125.0, 0.0, 1e8),
     Param(P + 'drive.Kp_w', 'float', 'Nm/(rad/s)', 0.45, 0.0, 1e3),
@@ -112,9 +150,11 @@ PLANT_SCHEMA = Schema('plant_sim', [
     Param(P + 'drive.omega_max', 'float', 'rad/s', 8000 * RPM, 1.0, 1e5),
     Param(P + 'drive.delay', 'float', 's', 1.0e-3, 0.0, 0.1, doc='whole ticks'),
     # accumulator, eq. 3.18
-    Param(P + 'accumulator.V_0', 'float', 'm^3', 6.0e-3, 1e-5, 1.0),
-    Param(P + 'accumulator.P_0', 'float', 'Pa', 8.0e5, 0.0, 1e8, doc='pre-charge, gauge'),
-    Param(P + 'accumulator.p_init', 'float', 'Pa', 10.0e5, 0.0, 1e8, doc='initial, gauge'),
+    Param(P + 'accumulator.V_0', 'float', 'm^3', 6.0e-3, 1e-5, 1.0, field='acc_V_0'),
+    Param(P + 'accumulator.P_0', 'float', 'Pa', 8.0e5, 0.0, 1e8, doc='pre-charge, gauge',
+          field='acc_P_0'),
+    Param(P + 'accumulator.p_init', 'float', 'Pa', 10.0e5, 0.0, 1e8, doc='initial, gauge',
+          field='acc_p_init'),
     Param(P + 'accumulator.p_atm', 'float', 'Pa', 101325.0, 0.0, 2e5),
     # valves
     Param(P + 'valves.check_K', 'float', 'm^3/(s Pa)', 1.0e-9, 1e-14, 1e-5),
@@ -127,7 +167,7 @@ PLANT_SCHEMA = Schema('plant_sim', [
     Param(P + 'valves.bypass_time', 'float', 's', 0.02, 0.0, 10.0),
     Param(P + 'valves.bypass_K', 'float', 'm^3/(s Pa)', 1.0e-9, 0.0, 1e-5),
     # sensors (thesis 4.1.2, Fig 4.6)
-    Param(P + 'sensors.noise', 'bool', '', True),
+    Param(P + 'sensors.noise', 'bool', '', True, field='sensor_noise'),
     Param(P + 'sensors.position_sigma', 'float', 'm', 10e-6, 0.0, 1e-2),
     Param(P + 'sensors.position_gm_sigma', 'float', 'm', 20e-6, 0.0, 1e-2),
     Param(P + 'sensors.position_gm_corner', 'float', 'Hz', 1.0, 1e-3, 1e3),
@@ -135,79 +175,18 @@ PLANT_SCHEMA = Schema('plant_sim', [
     Param(P + 'sensors.speed_sigma', 'float', 'rad/s', 0.1, 0.0, 100.0),
     Param(P + 'sensors.current_sigma', 'float', 'A', 0.02, 0.0, 10.0),
     Param(P + 'sensors.pressure_sigma', 'float', 'Pa', 0.316 * BAR, 0.0, 1e7),
-])
+], check=check)
 
 
-@dataclass(frozen=True)
-class PlantParams:
-    """Typed, validated plant parameters (SI units); build with :meth:`from_dict`."""
+_PYTYPE = {'float': float, 'int': int, 'bool': bool, 'str': str, 'float[]': tuple}
+# one attribute per plant.* Param, named by its field (the declaration above is the only one)
+_Fields = make_dataclass('_Fields', [(p.attr, _PYTYPE[p.type]) for p in PLANT_SCHEMA.params],
+                         frozen=True)
 
-    Ts: float
-    substeps: int
-    theta: float
-    theta_stiff: float
-    newton_max_iter: int
-    newton_tol: float
-    beta: float
-    A_p: float
-    V_d: float
-    m_p: float
-    C_c: float
-    stroke: float
-    stop_k: float
-    stop_c: float
-    friction_model: str
-    F_c: float
-    F_s: float
-    v_s: float
-    mu: float
-    D_p: float
-    C_p: float
-    C_r: float
-    leakage_model: str
-    eta_v_omega: tuple
-    eta_v_pd: tuple
-    eta_v: tuple
-    motor_model: str
-    R: float
-    L: float
-    k_T: float
-    k_E: float
-    J_eq: float
-    b_eq: float
-    n_p: int
-    L_d: float
-    L_q: float
-    drive_period: float
-    Kp_i: float
-    Ki_i: float
-    Kp_w: float
-    Ki_w: float
-    lowpass_w: float
-    V_max: float
-    I_max: float
-    omega_max: float
-    delay: float
-    acc_V_0: float
-    acc_P_0: float
-    acc_p_init: float
-    p_atm: float
-    check_K: float
-    check_crack: float
-    relief_crack: float
-    relief_K: float
-    band: float
-    onoff_time: float
-    bypass_time: float
-    bypass_K: float
-    sensor_noise: bool
-    position_sigma: float
-    position_gm_sigma: float
-    position_gm_corner: float
-    position_resolution: float
-    speed_sigma: float
-    current_sigma: float
-    pressure_sigma: float
+
+class PlantParams(_Fields):
+    """Typed, validated plant parameters (SI units), one attribute per ``plant.*`` Param of
+    PLANT_SCHEMA (its ``attr``); build with :meth:`from_dict`."""
 
     @property
     def C_eq(self) -> float:
@@ -240,58 +219,12 @@ class PlantParams:
 
     @classmethod
     def from_dict(cls, values: dict) -> 'PlantParams':
-        """Build from ``load(PLANT_SCHEMA, files)``; checks cross-parameter consistency."""
-        # validate (fills defaults, one-line error for a missing identity parameter)
+        """Build from ``load(PLANT_SCHEMA, files)``: validated again (defaults filled, the
+        cross-key checks of :func:`check`, one line for a missing identity parameter)."""
         v = PLANT_SCHEMA.validate({k: x for k, x in values.items() if k.startswith(P)},
                                   context='plant parameters')
-        names = {f.name for f in fields(cls)}
-        out = {}
-        for key, value in v.items():
-            if not key.startswith(P):
-                continue
-            group, _, leaf = key[len(P):].partition('.')
-            name = _FIELD.get((group, leaf), leaf)
-            if name not in names:
-                raise ParamError(f'parameters: unknown plant parameter {key!r}')
-            out[name] = tuple(value) if isinstance(value, list) else value
-        p = cls(**out)
-        p._check()
-        return p
-
-    def _check(self):
-        ratio = self.Ts / self.drive_period
-        if abs(ratio - round(ratio)) > 1e-9 or self.substeps % int(round(ratio)):
-            raise ParamError(f'parameters: plant.sim.substeps = {self.substeps} with '
-                             f'plant.drive.period = {self.drive_period:g}: expected Ts/period '
-                             f'an integer that divides substeps')
-        n_w, n_p = len(self.eta_v_omega), len(self.eta_v_pd)
-        if len(self.eta_v) != n_w * n_p:
-            raise ParamError(f'parameters: plant.pump.eta_v has {len(self.eta_v)} values: '
-                             f'expected len(eta_v_omega)*len(eta_v_pd) = {n_w * n_p}')
-        for key, arr in (('eta_v_omega', self.eta_v_omega), ('eta_v_pd', self.eta_v_pd)):
-            if any(b <= a for a, b in zip(arr, arr[1:])):
-                raise ParamError(f'parameters: plant.pump.{key} = {list(arr)}: expected '
-                                 f'strictly increasing values')
-        if self.F_s < self.F_c:
-            raise ParamError(f'parameters: plant.friction.F_s = {self.F_s}: expected >= '
-                             f'F_c = {self.F_c}')
-        if abs(self.delay / self.Ts - round(self.delay / self.Ts)) > 1e-6:
-            raise ParamError(f'parameters: plant.drive.delay = {self.delay}: expected a whole '
-                             f'number of ticks of {self.Ts} s')
-        if self.acc_p_init <= self.acc_P_0:
-            raise ParamError(f'parameters: plant.accumulator.p_init = {self.acc_p_init}: '
-                             f'expected above the pre-charge P_0 = {self.acc_P_0}')
-
-
-_FIELD = {
-    ('sim', 'Ts'): 'Ts', ('sim', 'substeps'): 'substeps',
-    ('friction', 'model'): 'friction_model', ('pump', 'leakage_model'): 'leakage_model',
-    ('motor', 'model'): 'motor_model', ('drive', 'period'): 'drive_period',
-    ('drive', 'delay'): 'delay',
-    ('accumulator', 'V_0'): 'acc_V_0', ('accumulator', 'P_0'): 'acc_P_0',
-    ('accumulator', 'p_init'): 'acc_p_init', ('accumulator', 'p_atm'): 'p_atm',
-    ('sensors', 'noise'): 'sensor_noise',
-}
+        return cls(**{spec.attr: tuple(v[spec.name]) if isinstance(v[spec.name], list)
+                      else v[spec.name] for spec in PLANT_SCHEMA.params})
 
 
 def pack(p: PlantParams) -> np.ndarray:
@@ -358,11 +291,11 @@ def leakage_table(p: PlantParams) -> np.ndarray:
 def plant_file() -> str:
     """The shipped plant parameter file, config/plant.yaml (or $EHA_CONFIG_DIR/plant.yaml)."""
     import os
-    from ..params import default_config_dir
+    from ..config.params import default_config_dir
     return os.path.join(default_config_dir(), 'plant.yaml')
 
 
 def nominal_plant(overrides: dict | None = None) -> dict:
     """Loaded and validated plant parameters from :func:`plant_file` plus overrides."""
-    from ..params import load
+    from ..config.params import load
     return load(PLANT_SCHEMA, [plant_file()], overrides or {})

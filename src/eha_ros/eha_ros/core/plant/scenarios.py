@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from ..params import load
-from ..pid import PID
+from ..config.params import load
+from ..controller.pid import PID
 from .model import EhaPlant
 from .parameters import PLANT_SCHEMA, plant_file
 

@@ -39,17 +39,29 @@ def sample(S, P, U, n, out):
 
 
 class NoiseSource:
-    """Seeded normal draws (numpy Generator) in blocks of BLOCK ticks: reproducible runs."""
+    """Seeded normal draws (numpy Generator) in blocks of BLOCK ticks: reproducible runs.
+    ``counter``: a one-element array that holds the rows used (the plant's aux vector, which
+    the compiled step advances); its own when not given."""
 
-    def __init__(self, seed: int):
+    def __init__(self, seed: int, counter=None):
         self.rng = np.random.default_rng(seed)
         self.block = self.rng.standard_normal((BLOCK, L.NNOISE))
-        self.k = 0
+        self._k = counter if counter is not None else np.zeros(1)
+        self._k[0] = 0.0
+
+    @property
+    def k(self) -> int:
+        """Rows of the block already used."""
+        return int(self._k[0])
+
+    def refill(self) -> None:
+        """A new block when this one is used up (before a tick takes its row)."""
+        if self._k[0] >= BLOCK:
+            self.block = self.rng.standard_normal((BLOCK, L.NNOISE))
+            self._k[0] = 0.0
 
     def next_index(self) -> int:
         """Row of ``self.block`` to use for this tick (draws a new block when used up)."""
-        if self.k == BLOCK:
-            self.block = self.rng.standard_normal((BLOCK, L.NNOISE))
-            self.k = 0
-        self.k += 1
+        self.refill()
+        self._k[0] += 1.0
         return self.k - 1

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cli import UsageError
+from ..config.cli import UsageError
 
 DB = 20.0
 

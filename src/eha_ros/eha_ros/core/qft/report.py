@@ -6,7 +6,7 @@ import json
 import numpy as np
 import yaml
 
-from ..params import ParamError
+from ..config.params import ParamError
 from .lti import Zpk, from_num_den
 
 NAMES = ('position_controller', 'prefilter', 'velocity_controller')

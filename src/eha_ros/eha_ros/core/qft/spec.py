@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..params import Param, ParamError, Schema, load
+from ..config.params import Param, ParamError, Schema, load
 
 S = 'spec.'
 QFT_SPEC_SCHEMA = Schema('design_qft', [

@@ -2,7 +2,7 @@
 plant.* set (config/plant.yaml: Ts, valve opening time, current limit, k_T, D_p, J_eq, b_eq)."""
 from __future__ import annotations
 
-from ..params import Param, Schema
+from ..config.params import Param, Schema
 from ..plant.parameters import PLANT_SCHEMA
 
 S = 'switch.'
@@ -87,7 +87,7 @@ NODE = Schema('switch_manager', [
           doc='no /eha/state for this long is reported on /diagnostics'),
     Param(S + 'node.log_dir', 'str', '', 'out/redundancy',
           doc='folder of the switch-event log events.jsonl ("" = no file)'),
-    # the loop supervisor (core.supervisor): any condition -> the safe state, ERROR
+    # the loop supervisor (core.loop.supervisor): any condition -> the safe state, ERROR
     Param(S + 'supervisor.stall_timeout', 'float', 's', 0.2, 0.01, 10.0,
           doc='real time: a loop stream (state, estimate, command) whose seq does not advance '
               'for this long (wall time) is a stalled node'),
@@ -110,17 +110,18 @@ NODE = Schema('switch_manager', [
 ])
 
 def check(p: dict) -> None:
-    """Cross-key checks (one line each): clear levels must not exceed trip levels."""
-    from ..params import ParamError
+    """Each monitor's clear level at most its trip level (hysteresis); health.pressure's
+    low_side_min at most low_side_max."""
+    from ..config.params import ParamError
     for name in ('speed', 'current', 'pressure', 'estimator'):
         trip, clear = p[f'{H}{name}.trip'], p[f'{H}{name}.clear']
         if clear > trip:
             raise ParamError(f'{H}{name}.clear = {clear!r}: expected <= {H}{name}.trip '
-                             f'({trip!r}) (hysteresis)')
+                             f'({trip!r}) (hysteresis)', f'{H}{name}.clear')
     lo, hi = p[H + 'pressure.low_side_min'], p[H + 'pressure.low_side_max']
     if lo > hi:
         raise ParamError(f'{H}pressure.low_side_min = {lo!r}: expected <= '
-                         f'{H}pressure.low_side_max ({hi!r})')
+                         f'{H}pressure.low_side_max ({hi!r})', H + 'pressure.low_side_min')
 
 
-SCHEMA = Schema('switch_manager', list(PLANT_SCHEMA.params) + list(NODE.params), check)
+SCHEMA = PLANT_SCHEMA + Schema('switch_manager', NODE.params, check)

@@ -36,6 +36,8 @@ from .health import ChannelSample, HealthMonitor
 
 ACTIVE, SWITCHING, DEGRADED, FAILED_SAFE = 'ACTIVE', 'SWITCHING', 'DEGRADED', 'FAILED_SAFE'
 NAMES = ('A', 'B')
+# the state names of name() as numbers, for recorded arrays (batch, campaigns)
+STATE_CODES = {'ACTIVE_A': 0, 'ACTIVE_B': 1, 'SWITCHING': 2, 'DEGRADED': 3, 'FAILED_SAFE': 4}
 
 
 def state_name(state: str, channel: int) -> str:
@@ -219,8 +221,8 @@ class SwitchManager:
                     f'{why}; safe state {self.safe_mode}')
 
     def safe_state(self, why: str) -> bool:
-        """The loop cannot be trusted (a position fault, core.safe_state; the loop supervisor,
-        core.supervisor): the safe state, latched like both couples failed. Returns True when
+        """The loop cannot be trusted (a position fault, core.loop.safe_state; the loop supervisor,
+        core.loop.supervisor): the safe state, latched like both couples failed. Returns True when
         this call entered it."""
         if self.state == FAILED_SAFE:
             return False

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..cli import UsageError
-from ..report import write_json
+from ..config.cli import UsageError
+from ..io.report import write_json
 from . import family as FAM
 from . import scenarios as SC
 
@@ -56,11 +56,11 @@ class CampaignResult:
 
 
 def nominal_params(config_dir: str | None = None) -> dict:
-    """{node: parameter dict} of the loop's nodes from config/ (core.batch.NODE_FILES)."""
-    from ..batch import node_params
+    """{node: parameter dict} of the loop's nodes from config/ (core.config.registry.NODE_FILES)."""
+    from .batch import node_params
     from ..controller.params import SCHEMA as CTL
     from ..estimator.params import SCHEMA as EST
-    from ..plant_sim_params import SCHEMA as SIM
+    from ..plant.node_params import SCHEMA as SIM
     from ..redundancy.params import SCHEMA as SW
     schemas = {'plant_sim': SIM, 'estimator': EST, 'controller': CTL, 'switch_manager': SW}
     out = {n: node_params(n, schemas[n], config_dir) for n in NODES}

@@ -12,8 +12,8 @@ import os
 import numpy as np
 import yaml
 
-from ..cli import UsageError
-from ..params import default_config_dir
+from ..config.cli import UsageError
+from ..config.params import default_config_dir
 from ..qft.family import NAMES, grid_scales, scaled_params
 
 EXTRA = ('friction', 'noise', 'leak_split')

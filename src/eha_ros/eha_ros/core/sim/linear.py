@@ -36,21 +36,21 @@ STIFF_FREQS_HZ = (1, 4, 7)
 # ------------------------------------------------------------------------------ inputs
 def default_plant(config_dir: str | None = None) -> dict:
     """config/plant.yaml validated against the plant schema (dotted keys)."""
-    from ..params import default_config_dir, load
+    from ..config.params import default_config_dir, load
     from ..plant.parameters import PLANT_SCHEMA
     return load(PLANT_SCHEMA, [os.path.join(config_dir or default_config_dir(), 'plant.yaml')])
 
 
 def default_controller(config_dir: str | None = None) -> dict:
     """The controller node's parameters (plant.yaml, controller.yaml, controller_node.yaml)."""
-    from ..batch import node_params
+    from .batch import node_params
     from ..controller.params import SCHEMA
     return node_params('controller', SCHEMA, config_dir)
 
 
 def default_spec(config_dir: str | None = None):
     """config/qft_spec.yaml if present, else the schema defaults (the thesis spec)."""
-    from ..params import default_config_dir
+    from ..config.params import default_config_dir
     from ..qft import spec as qs
     path = os.path.join(config_dir or default_config_dir(), 'qft_spec.yaml')
     return qs.load_spec(path) if os.path.isfile(path) else qs.default_spec()

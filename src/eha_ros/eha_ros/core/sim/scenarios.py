@@ -10,7 +10,7 @@ A scenario is a YAML file (config/campaigns/<name>.yaml; users add their own)::
       overshoot_pct: {max: 5.0}
       peak_deviation_m: {max_rel: {to: lin_peak_deviation_m, factor: 1.25, offset: 5.0e-5}}
 
-One run (:func:`run`) = the batch closed loop (core.batch.BatchLoop, compiled path) of the
+One run (:func:`run`) = the batch closed loop (core.sim.batch.BatchLoop, compiled path) of the
 stack -- nonlinear plant, Kalman estimator, QFT controller, switch manager, in the stack's tick
 order -- on ONE plant variant (core.sim.family.plant_params) with one noise seed; estimator,
 controller and switch manager keep the nominal parameters they are given.
@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import yaml
 
-from ..cli import UsageError
-from ..params import default_config_dir
+from ..config.cli import UsageError
+from ..config.params import default_config_dir
 
 # kind -> default params (SI units). Times in s from the start of the run.
 KINDS = {
@@ -191,7 +191,7 @@ def segment_ticks(f: float, p: dict) -> int:
 
 def signals(scn: Scenario, Ts: float):
     """(references, loads, faults, commands) arrays/schedules of n ticks; faults/commands as
-    time-sorted (t, payload) lists for core.redundancy.batch.schedule."""
+    time-sorted (t, payload) lists for core.sim.switchover.schedule."""
     p, kind = scn.params, scn.kind
     n = int(round(scn.duration / Ts))
     t = np.arange(n) * Ts
@@ -228,9 +228,9 @@ def signals(scn: Scenario, Ts: float):
 def build_loop(nominal: dict, plant: dict, seed: int, faults=None, commands=None):
     """The stack's batch loop on one plant: plant from ``plant`` (the variant), estimator,
     controller and switch manager from ``nominal`` (dicts of node parameters)."""
-    from ..batch import BatchLoop
+    from .batch import BatchLoop
     from ..estimator.estimator import Estimator
-    from ..redundancy.batch import controller_from_params
+    from .switchover import controller_from_params
     from ..plant import EhaPlant
     from ..redundancy.state_machine import SwitchManager
     pl = EhaPlant(plant, seed=seed)
@@ -244,8 +244,8 @@ def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool 
     """One run; returns (figures dict, decimated traces dict or None).
 
     multipliers: one family row (core.sim.family.COLUMNS; other keys are ignored)."""
-    from ..closed_loop import R_ACTIVE, R_EN, R_FAULT, R_STATE, R_U, R_VALVE, R_X0, R_XHAT, R_XM
-    from ..redundancy.batch import schedule
+    from .closed_loop import R_ACTIVE, R_EN, R_FAULT, R_STATE, R_U, R_VALVE, R_X0, R_XHAT, R_XM
+    from .switchover import schedule
     from .family import plant_params
     plant = plant_params(nominal['plant_sim'], multipliers)
     Ts = plant['plant.sim.Ts']
@@ -377,8 +377,8 @@ def sine_figures(s, p, Ts):
 
 def handover_figures(s, p, t_event: float):
     """Figures of a hand-over to couple B at t_event while tracking a sine (Table 3.4): the
-    tracking figures of core.redundancy.batch, the time until B drives, the final channel."""
-    from ..redundancy.batch import driving_time, tracking_figures
+    tracking figures of core.sim.switchover, the time until B drives, the final channel."""
+    from .switchover import driving_time, tracking_figures
     f = tracking_figures(s['t'], s['truth'], s['reference'], t_event, 1.0 / p['freq'])
     f['drive_time_s'] = driving_time(s['t'], s['valve'], s['enable'], 1, t_event)
     f['final_channel'] = float(s['active'][-1])
@@ -398,10 +398,10 @@ def motor_fail_figures(s, p, Ts):
 def sensor_fault_figures(s, p, Ts):
     """Estimator's detection time of the injected sensor fault (inf: none; a fault at or after
     the run's end is never injected: false_alarm), false alarms before it (a fault code or the
-    safe state); the safe state (core.safe_state): time from the fault to the hydraulic lock
+    safe state); the safe state (core.loop.safe_state): time from the fault to the hydraulic lock
     (switch manager FAILED_SAFE, both couples' valves closed) and the piston's drift from
     then to the end of the run."""
-    from ..redundancy.batch import STATE_CODES
+    from ..redundancy.state_machine import STATE_CODES
     t, code = s['t'], s['fault']
     before = t < p['t_fault'] - 1e-9
     hits = np.nonzero((~before) & (code != 0))[0]

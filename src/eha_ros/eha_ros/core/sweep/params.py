@@ -1,7 +1,7 @@
 """Parameters of the sweep node (sweep.*) plus the shared plant.* set."""
 from __future__ import annotations
 
-from ..params import Param, Schema
+from ..config.params import Param, ParamError, Schema
 from ..plant.parameters import PLANT_SCHEMA
 
 NODE = Schema('sweep', [
@@ -46,7 +46,6 @@ NODE = Schema('sweep', [
     Param('sweep.exit_when_done', 'bool', '', True),
 ])
 
-SCHEMA = PLANT_SCHEMA + NODE
 
 
 def build_plan(p: dict):
@@ -74,3 +73,15 @@ def build_plan(p: dict):
                      p['sweep.amplitude'], p['sweep.offset'], p['sweep.chirp_fade'], Ts)
     check_limits(0.0, p['sweep.amplitude'], p['sweep.offset'], stroke, Ts)
     return Step(p['sweep.amplitude'], p['sweep.step_duration'], 0.1, p['sweep.offset'], Ts)
+
+
+def check(p: dict) -> None:
+    """The node refuses a sweep it cannot run (build_plan's UsageError): the same line here."""
+    from ..config.cli import UsageError
+    try:
+        build_plan(p)
+    except UsageError as err:
+        raise ParamError(str(err)) from None
+
+
+SCHEMA = PLANT_SCHEMA + Schema('sweep', NODE.params, check)

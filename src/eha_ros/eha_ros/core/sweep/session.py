@@ -17,7 +17,7 @@ import threading
 
 import numpy as np
 
-from ..report import bode_png, stiffness_png, write_csv, write_json
+from ..io.report import bode_png, stiffness_png, write_csv, write_json
 from .analysis import (BANDWIDTH_DB, sine_point, stiffness_kn_per_mm, stiffness_summary,
                        summarize)
 

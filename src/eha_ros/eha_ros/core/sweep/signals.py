@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cli import UsageError
+from ..config.cli import UsageError
 
 
 @dataclass(frozen=True)

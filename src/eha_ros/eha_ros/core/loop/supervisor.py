@@ -2,7 +2,7 @@
 
 Runs in the switch manager (it takes all three streams and owns the safe state, so the
 watch costs no extra message). The first condition met trips it, latched until
-:meth:`LoopSupervisor.reset`; the node then enters the safe state (core.safe_state: hold,
+:meth:`LoopSupervisor.reset`; the node then enters the safe state (core.loop.safe_state: hold,
 drives off, valves closed), logs one line and reports ERROR on /diagnostics.
 
 - stalled: a stream silent for ``stall_timeout`` seconds of wall time, counted only while
@@ -14,7 +14,7 @@ drives off, valves closed), logs one line and reports ERROR on /diagnostics.
   ``window`` had no command(k) when state(k+1) arrived (the loop cannot hold real time).
 - rejected: ``reject_time`` of estimates in a row made without the position measurement,
   which the estimator refused (out of range, non-finite) with no sensor-fault verdict of its
-  own (that one has its own safe-state path, core.safe_state).
+  own (that one has its own safe-state path, core.loop.safe_state).
 - limit cycle: within the last ``window``, the speed command at |u| >= ``saturation`` x
   omega_max on ``cycle_share`` of the ticks with ``cycle_reversals`` sign reversals between
   saturated commands (bang-bang oscillation; a step saturates one way, and the sweeps stay
@@ -105,7 +105,8 @@ class LoopSupervisor:
 
     def estimate(self, seq: int, rejected: bool, stale: bool, now: float):
         """``rejected``: made without the position measurement, which the estimator refused
-        (not one it isolated after its own sensor-fault verdict: core.safe_state acts on that)."""
+        (not one it isolated after its own sensor-fault verdict: core.loop.safe_state acts on
+        that)."""
         self._progress('estimate', seq, now)
         if stale:                            # no state: the stall check's business
             return

@@ -16,7 +16,7 @@ def run_dir(base: str = 'out', name: str | None = None) -> str:
     """A folder base/<name or timestamp>. ``name`` is one folder name (no path: a run stays
     under ``base``); a folder holding a finished run (FINISHED) is never reused: -1, -2, ...
     are appended. A bad name or a base that cannot be written is a UsageError (one line)."""
-    from .cli import UsageError
+    from ..config.cli import UsageError
     if name is not None and (not name or name in ('.', '..') or os.sep in name
                              or (os.altsep and os.altsep in name)):
         raise UsageError(f'--name {name!r}: expected a plain folder name (no path), '
@@ -127,7 +127,7 @@ def bode_png(path: str, points: list[dict], model=None, title: str = '') -> None
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    from .sweep.analysis import unwrap_deg
+    from ..sweep.analysis import unwrap_deg
     f = [p['freq_hz'] for p in points]
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
     if model is not None:

@@ -1,7 +1,7 @@
 """Parameters of the recorder node (recorder.*): what to record, where, how deep the queues."""
 from __future__ import annotations
 
-from .params import Param, Schema
+from ..config.params import Param, Schema
 
 SCHEMA = Schema('recorder', [
     Param('recorder.output', 'str', '', '',

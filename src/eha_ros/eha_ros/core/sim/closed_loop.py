@@ -7,7 +7,7 @@ controller.stepper, redundancy.stepper): the same operations as the Python objec
 results are bit-identical. A tick that anything event-like would touch -- a fault expiring,
 a measurement to reject, a valve step of a switch, a monitor verdict the state machine must
 act on, a non-finite value -- is not done here: the segment stops *before* it (components
-rolled back to the tick's start) and returns its index, for core.batch.BatchLoop to do that
+rolled back to the tick's start) and returns its index, for core.sim.batch.BatchLoop to do that
 tick with the Python objects. So a segment never gives an answer the per-tick path would not.
 """
 from __future__ import annotations
@@ -17,14 +17,14 @@ import math
 import numpy as np
 from numba import njit
 
-from .controller import stepper as CS
-from .estimator import stepper as ES
-from .jit_cache import drop_stale
-from .plant import layout as L
-from .plant import stepper as PS
-from .redundancy import stepper as RS
+from ..controller import stepper as CS
+from ..estimator import stepper as ES
+from ..jit_cache import drop_stale
+from ..plant import layout as L
+from ..plant import stepper as PS
+from ..redundancy import stepper as RS
 
-drop_stale(__file__, 'plant', 'estimator', 'controller', 'redundancy')
+drop_stale(__file__, '.', '../plant', '../estimator', '../controller', '../redundancy', '../loop')
 
 END, EVENT, NOISE = 0, 1, 2          # why a segment returned
 # record columns, one row per tick
@@ -128,7 +128,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         else:
             x_hat, innov, nis, nd, code = pos, math.nan, math.nan, 0, 0
         CS.request(ck, cc, ref)
-        # a position fault (core.safe_state) is Python's: rolled back, then done by BatchLoop
+        # a position fault (core.loop.safe_state) is Python's: rolled back, then done by BatchLoop
         ok = math.isfinite(x_hat) and not (has_est and ES.position_fault(ee))
         if ok and has_mgr:
             ok = RS.supervise(hk, mk, ms, hs, g, k * Ts, k, u, w_meas, i_meas, pa, pb,

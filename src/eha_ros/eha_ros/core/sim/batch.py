@@ -10,22 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import safe_state as SAFE
+from ..loop import safe_state as SAFE
 
-from .params import default_config_dir, load
+from ..config.params import default_config_dir, load
+from ..config.registry import NODE_FILES
 
-# node -> params files in config/ (later files override earlier ones); eha_ros.stack starts the
-# node processes with the same files
-NODE_FILES = {
-    'plant_sim': ['plant.yaml', 'plant_sim.yaml'],
-    'estimator': ['plant.yaml', 'estimator.yaml'],
-    'controller': ['plant.yaml', 'controller.yaml', 'controller_node.yaml'],
-    'switch_manager': ['plant.yaml', 'switch_manager.yaml'],
-    'sweep': ['plant.yaml', 'sweep.yaml'],
-    'hardware_bridge': ['plant.yaml', 'hardware_bridge.yaml'],
-    'recorder': ['recorder.yaml'],
-    'live': ['live.yaml'],
-}
 
 
 def node_params(node: str, schema, config_dir: str | None = None, overrides=None) -> dict:
@@ -51,12 +40,12 @@ class BatchStack:
     """Plant + estimator + controller cores; ``tick(reference, load)`` advances one Ts."""
 
     def __init__(self, config_dir: str | None = None, seed: int = 1, overrides=None):
-        from .controller.params import SCHEMA as CTL
-        from .controller.position import PositionController
-        from .estimator.estimator import Estimator
-        from .estimator.params import SCHEMA as EST
-        from .plant import EhaPlant
-        from .plant_sim_params import SCHEMA as SIM
+        from ..controller.params import SCHEMA as CTL
+        from ..controller.position import PositionController
+        from ..estimator.estimator import Estimator
+        from ..estimator.params import SCHEMA as EST
+        from ..plant import EhaPlant
+        from ..plant.node_params import SCHEMA as SIM
         ov = overrides or {}
         self.plant_params = node_params('plant_sim', SIM, config_dir, ov.get('plant_sim'))
         self.plant = EhaPlant(self.plant_params, seed=seed)
@@ -107,8 +96,8 @@ class BatchLoop:
     + switch manager (or None) in one process, tick by tick or fast.
 
     :meth:`tick` is the reference semantics, what the nodes do (the loop body of
-    core.redundancy.batch.run); :meth:`run` with ``fast=True`` advances the ticks where
-    nothing event-like happens in compiled segments (core.closed_loop) and does every other
+    core.sim.switchover.run); :meth:`run` with ``fast=True`` advances the ticks where
+    nothing event-like happens in compiled segments (core.sim.closed_loop) and does every other
     tick -- scheduled faults and commands, a monitor verdict the state machine acts on, a
     switch's valve/drive steps, rejected measurements -- with :meth:`tick`. Both give the same
     numbers, bit for bit (tests/test_batch_fast.py).
@@ -130,15 +119,15 @@ class BatchLoop:
         self.last_status = (manager.active, manager.state) if manager is not None else None
         self.responses = []                # (tick, 'fault' | 'command', (ok, message))
         self.segments = self.fast_ticks = 0
-        self.holding = False               # controller in the safe state (core.safe_state)
+        self.holding = False               # controller in the safe state (core.loop.safe_state)
 
     # ------------------------------------------------------------------ reference tick
     def tick(self, k: int, reference: float, load: float, row) -> None:
-        """Tick k as the stack does it; writes its record ``row`` (core.closed_loop R_*)."""
+        """Tick k as the stack does it; writes its record ``row`` (core.sim.closed_loop R_*)."""
         from .closed_loop import (R_ACTIVE, R_BYPASS, R_CHANNEL, R_EN, R_FAULT, R_I, R_IM,
                                   R_INNOV, R_NIS, R_NISDIM, R_PM, R_STATE, R_T, R_U, R_VALVE,
                                   R_W, R_WM, R_X, R_X0, R_XHAT, R_XM)
-        from .redundancy.health import ChannelSample
+        from ..redundancy.health import ChannelSample
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
         t = k * self.Ts
         for f in self.faults.get(k, ()):
@@ -192,7 +181,7 @@ class BatchLoop:
         row[R_CHANNEL] = m.active_channel
         row[R_PM], row[R_PM + 1], row[R_IM:R_IM + 2] = m.pressure_a, m.pressure_b, m.motor_current
         if mgr is not None:
-            from .redundancy.batch import STATE_CODES
+            from ..redundancy.state_machine import STATE_CODES
             row[R_ACTIVE], row[R_STATE] = mgr.active, STATE_CODES[mgr.name]
         else:
             row[R_ACTIVE] = row[R_STATE] = m.active_channel
@@ -200,7 +189,7 @@ class BatchLoop:
     # ------------------------------------------------------------------ fast run
     def run(self, references, loads=None, fast: bool = True, k0: int = 0):
         """Ticks k0 .. k0+n-1 with references[i], loads[i] (arrays of n); returns the
-        (n, NREC) record (core.closed_loop R_* columns, row i = tick k0 + i)."""
+        (n, NREC) record (core.sim.closed_loop R_* columns, row i = tick k0 + i)."""
         from .closed_loop import NREC
         refs = np.ascontiguousarray(references, dtype=float)
         n = len(refs)
@@ -226,7 +215,7 @@ class BatchLoop:
         return rec
 
     def fast_supported(self) -> bool:
-        from .estimator import stepper as ES
+        from ..estimator import stepper as ES
         return self.est is None or ES.supported(self.est)
 
     def _ready(self) -> bool:
@@ -239,12 +228,10 @@ class BatchLoop:
     def _segment(self, k: int, stop: int, off: int, refs, loads, rec) -> int:
         """Compiled ticks k .. stop-1 until one needs Python; returns that tick (or stop)."""
         from . import closed_loop as CL
-        from .controller import stepper as CS
-        from .estimator import stepper as ES
-        from .plant import stepper as PS
-        from .plant.layout import NNOISE
-        from .plant.sensors import BLOCK
-        from .redundancy import stepper as RS
+        from ..controller import stepper as CS
+        from ..estimator import stepper as ES
+        from ..plant import stepper as PS
+        from ..redundancy import stepper as RS
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
         packed = PS.pack(plant)
         if packed is None:
@@ -267,8 +254,7 @@ class BatchLoop:
             self.fast_ticks += k - k0
             if why != CL.NOISE:
                 break
-            noise.block = noise.rng.standard_normal((BLOCK, NNOISE))   # NoiseSource.next_index
-            aux[PS.A_NOISE_K] = 0
+            noise.refill()                    # the block is used up: the next one
         self.u = float(u)
         PS.unpack(plant, aux, ring, table)
         if est is not None:
@@ -281,13 +267,13 @@ class BatchLoop:
 
 def _dummy_estimator():
     """Arrays of the estimator stepper's types when the loop has no estimator."""
-    from .estimator import stepper as ES
+    from ..estimator import stepper as ES
     v, m = np.zeros(2), np.zeros((2, 2))
     return np.zeros(ES.NK), np.zeros(ES.NE), (v, m, m, m, v, m, m, m, m, v, m, m, m, v, m, v,
                                              v, v, v, m, m)
 
 
 def _dummy_manager():
-    from .redundancy import stepper as RS
+    from ..redundancy import stepper as RS
     return (np.zeros(RS.NK), np.zeros((2, RS.NMON, 5)), np.zeros((2, RS.NMON, 3)),
             np.zeros(RS.NH), np.zeros(RS.NG))

@@ -32,8 +32,8 @@ pump lets the load move the piston. The stack's safe state needs both.
 """
 from __future__ import annotations
 
-from .estimator import adapt
-from .redundancy.state_machine import FAILED_SAFE
+from ..estimator import adapt
+from ..redundancy.state_machine import FAILED_SAFE
 
 
 def position_fault(verdict: int) -> bool:

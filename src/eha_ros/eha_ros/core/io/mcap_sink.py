@@ -4,7 +4,7 @@ Producers (subscription callbacks) only enqueue ``(channel, receive time, bytes)
 thread adds them to the file, so a slow disk or a chunk compression never blocks the executor.
 ``close()`` writes everything queued and the summary. A file that is not closed (recorder
 killed) has no index; its complete chunks read back with a non-seeking reader, and
-core.recording.recover makes it a finished file (Stack does when its recorder dies).
+core.io.recording.recover makes it a finished file (Stack does when its recorder dies).
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import queue
 import threading
 from collections import Counter
 
-from .cli import UsageError
+from ..config.cli import UsageError
 
 _STOP = object()
 

@@ -1,7 +1,31 @@
 """Parameters of the live node (live.*): what is served over the Foxglove WebSocket protocol."""
 from __future__ import annotations
 
-from .params import Param, Schema
+from ..config.params import Param, ParamError, Schema
+
+
+def decimation(entries) -> dict[str, int]:
+    """['/eha/sim/truth:10', ...] -> {'/eha/sim/truth': 10}; ParamError names a bad entry."""
+    out = {}
+    for item in entries:
+        if not item:
+            continue
+        topic, sep, n = item.rpartition(':')
+        try:
+            every = int(n)
+        except ValueError:
+            every = 0
+        if not sep or not topic.startswith('/') or every < 1:
+            raise ParamError(f"live.decimation: {item!r}: expected '/topic:N' with N >= 1",
+                             'live.decimation')
+        out[topic] = every
+    return out
+
+
+def check(p: dict) -> None:
+    """Every live.decimation entry is '/topic:N' with N >= 1."""
+    decimation(p['live.decimation'])
+
 
 SCHEMA = Schema('live', [
     Param('live.host', 'str', '', '127.0.0.1',
@@ -38,4 +62,4 @@ SCHEMA = Schema('live', [
           doc='sim time (header stamp of the newest message) broadcast to the viewer this '
               'often, with use_sim_time (lock-step)'),
     Param('live.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
-])
+], check)

@@ -19,7 +19,7 @@ from typing import Any, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
-from .cli import UsageError
+from ..config.cli import UsageError
 
 
 class RecordingError(UsageError):

@@ -112,5 +112,5 @@ def encoder(cls):
     scope = {'ENC': ENCAPSULATION, 'cache': cache, 'compile_layout': compile_layout}
     exec('\n'.join(lines), scope)               # noqa: S102 - generated from field types only
     encode = scope['encode']
-    encode.__doc__ = f'{cls.__name__} -> CDR bytes (core.cdr)'
+    encode.__doc__ = f'{cls.__name__} -> CDR bytes (core.io.cdr)'
     return encode

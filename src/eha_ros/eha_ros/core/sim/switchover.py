@@ -5,37 +5,26 @@ select(k) -> applied by the plant at k+1. Table 3.4 scenario helpers and the swi
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..params import default_config_dir, load
 from ..plant import EhaPlant
-from .params import SCHEMA
-from .state_machine import SwitchManager
-
-STATE_CODES = {'ACTIVE_A': 0, 'ACTIVE_B': 1, 'SWITCHING': 2, 'DEGRADED': 3, 'FAILED_SAFE': 4}
-
-
-def config(name: str) -> str:
-    return os.path.join(default_config_dir(), name)
+from ..redundancy.params import SCHEMA
+from ..redundancy.state_machine import STATE_CODES, SwitchManager  # noqa: F401 (callers)
+from .batch import node_params
 
 
 def switch_params(overrides: dict | None = None) -> dict:
-    """switch_manager parameters from config/plant.yaml + config/switch_manager.yaml."""
+    """switch_manager parameters from its files in config/ (the node registry's)."""
     named = {k if ':' in k else f'switch_manager:{k}': v for k, v in (overrides or {}).items()}
-    p = load(SCHEMA, [config('plant.yaml'), config('switch_manager.yaml')], named,
-             node='switch_manager')
-    return p
+    return node_params('switch_manager', SCHEMA, overrides=named)
 
 
 def make_controller(Ts: float):
     """The controller node's PositionController from the YAML it loads (not hardcoded)."""
     from ..controller.params import SCHEMA as CSCHEMA
-    p = load(CSCHEMA, [config('plant.yaml'), config('controller.yaml'),
-                       config('controller_node.yaml')], node='controller')
-    return controller_from_params(p, Ts)
+    return controller_from_params(node_params('controller', CSCHEMA), Ts)
 
 
 def controller_from_params(p: dict, Ts: float):
@@ -45,14 +34,10 @@ def controller_from_params(p: dict, Ts: float):
 
 
 def make_estimator():
-    """The estimator core from config/estimator.yaml, or None when it cannot be built."""
-    try:
-        from ..estimator.estimator import Estimator
-        from ..estimator.params import SCHEMA as ESCHEMA
-        return Estimator(load(ESCHEMA, [config('plant.yaml'), config('estimator.yaml')],
-                              node='estimator'))
-    except Exception:                       # estimator still being built: loop on measurement
-        return None
+    """The estimator node's core from the YAML it loads."""
+    from ..estimator.estimator import Estimator
+    from ..estimator.params import SCHEMA as ESCHEMA
+    return Estimator(node_params('estimator', ESCHEMA))
 
 
 @dataclass
@@ -80,13 +65,13 @@ def run(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | No
     switch_hold: the controller's integrator hold on a switch (control.switch_hold, s);
     None = as config/controller_node.yaml says. Like the controller node, the hold starts
     when /eha/redundancy reports SWITCHING or a new active channel.
-    fast: compiled segments between events (core.batch.BatchLoop, same numbers); False: every
+    fast: compiled segments between events (core.sim.batch.BatchLoop, same numbers); False: every
     tick through the Python objects."""
-    from ..batch import BatchLoop
-    from ..closed_loop import (R_ACTIVE, R_BYPASS, R_EN, R_I, R_INNOV, R_NIS, R_STATE, R_T,
+    from .batch import BatchLoop
+    from .closed_loop import (R_ACTIVE, R_BYPASS, R_EN, R_I, R_INNOV, R_NIS, R_STATE, R_T,
                                R_U, R_VALVE, R_W, R_WM, R_X, R_XM)
-    from ..plant.parameters import PLANT_SCHEMA
-    plant = EhaPlant(load(PLANT_SCHEMA, [config('plant.yaml')], plant_overrides or {}),
+    from ..plant.node_params import SCHEMA as PLANT_SIM
+    plant = EhaPlant(node_params('plant_sim', PLANT_SIM, overrides=plant_overrides),
                      seed=scn.seed)
     Ts = plant.Ts
     mgr = SwitchManager(switch_params(overrides))

@@ -25,7 +25,14 @@ import yaml
 
 
 class ParamError(Exception):
-    """A configuration error; ``str(err)`` is one line fit for a user."""
+    """A configuration error; ``str(err)`` is one line fit for a user.
+
+    ``key``: the parameter a cross-key check found wrong; Schema.validate puts the file that
+    set it in front of the line, so the node and check_config print the same line."""
+
+    def __init__(self, text: str, key: str | None = None):
+        super().__init__(text)
+        self.key = key
 
 
 _REQUIRED = object()
@@ -52,6 +59,12 @@ class Param:
     choices: tuple | None = None
     doc: str = ''
     min_len: int = 1             # arrays only
+    field: str | None = None     # the attribute it fills in a typed view (default: last part)
+
+    @property
+    def attr(self) -> str:
+        """Name of the attribute this parameter fills (``field`` or the last dotted part)."""
+        return self.field or self.name.rpartition('.')[2]
 
     @property
     def required(self) -> bool:
@@ -116,8 +129,10 @@ class Schema:
             raise ValueError(f'duplicate parameter in schema {self.node}')
 
     def __add__(self, other: 'Schema') -> 'Schema':
-        """Shared parameters + a node's own: the result is named after the added (node) part."""
-        return Schema(other.node, list(self.params) + list(other.params), other.check)
+        """Shared parameters + a node's own: the result is named after the added (node) part
+        and runs the cross-key checks of both (the shared part's first)."""
+        return Schema(other.node, list(self.params) + list(other.params),
+                      _chain(self.check, other.check))
 
     def defaults(self) -> dict:
         return {p.name: p.default for p in self.params if not p.required}
@@ -152,8 +167,32 @@ class Schema:
                                  f'{spec.expected()}')
             out[spec.name] = spec.default
         if self.check is not None:
-            self.check(out)
+            try:
+                self.check(out)
+            except ParamError as err:
+                if err.key is None:
+                    raise
+                raise ParamError(f'{sources.get(err.key) or context or "parameters"}: {err}',
+                                 err.key) from None
         return out
+
+
+def _chain(*checks):
+    """One cross-key check that runs the given ones (None skipped) in order."""
+    run = [p for c in checks if c is not None for p in getattr(c, 'parts', [c])]
+    if len(run) <= 1:
+        return run[0] if run else None
+
+    def check(values: dict) -> None:
+        for c in run:
+            c(values)
+    check.parts = run        # each one's docstring is a line of the parameter reference
+    return check
+
+
+def check_parts(schema: 'Schema') -> list:
+    """The cross-key checks a schema runs, in order."""
+    return [] if schema.check is None else list(getattr(schema.check, 'parts', [schema.check]))
 
 
 def _near(key: str, names: Iterable[str]) -> str:

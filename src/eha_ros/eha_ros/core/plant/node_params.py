@@ -1,9 +1,10 @@
 """Parameters of the plant_sim node: the plant model's plant.* set plus the node's sim_node.*."""
 from __future__ import annotations
 
-from .hardware.params import LOOP_PREFIX, loop_params
-from .params import Param, Schema
-from .plant.parameters import PLANT_SCHEMA
+from ..config.registry import LOOP_PREFIX
+from ..hardware.params import loop_params
+from ..config.params import Param, Schema
+from .parameters import PLANT_SCHEMA
 
 NODE = Schema('plant_sim', [
     Param('sim_node.seed', 'int', '', 0, 0, 2**31 - 1, doc='noise generator seed'),

@@ -1,0 +1,1 @@
+"""Outside the loop: recordings (MCAP), CDR, reports, the live view's protocol."""

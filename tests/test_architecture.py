@@ -1,0 +1,143 @@
+"""The package's shape (docs/design.md "Layout"): no import cycle, no rclpy under core/, one
+node registry that setup, the stack and the tools agree with."""
+import ast
+import os
+
+import eha_ros
+from eha_ros.core.config import registry
+
+BASE = os.path.dirname(os.path.abspath(eha_ros.__file__))
+
+
+def _modules() -> dict:
+    """module name -> file, for every .py of eha_ros."""
+    out = {}
+    for folder, _, names in os.walk(BASE):
+        for name in names:
+            if name.endswith('.py'):
+                path = os.path.join(folder, name)
+                rel = os.path.relpath(path, os.path.dirname(BASE))[:-3].replace(os.sep, '.')
+                out[rel[:-len('.__init__')] if rel.endswith('.__init__') else rel] = path
+    return out
+
+
+def _imports(module: str, path: str, modules: dict) -> set:
+    """Modules of eha_ros that ``module`` imports anywhere (functions included); a package's
+    __init__ counts as the package only when it is named alone."""
+    tree = ast.parse(open(path, encoding='utf-8').read())
+    package = module if path.endswith('__init__.py') else module.rpartition('.')[0]
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = package.split('.')
+                parts = parts[:len(parts) - node.level + 1]
+                base = '.'.join(parts + ([node.module] if node.module else []))
+            else:
+                base = node.module or ''
+            targets = [f'{base}.{a.name}' for a in node.names] + [base]
+        else:
+            continue
+        for t in targets:
+            while t and t not in modules:
+                t = t.rpartition('.')[0]
+            if t and t != module and not modules[t].endswith('__init__.py'):
+                found.add(t)
+    return found
+
+
+def _cycles(graph: dict) -> list:
+    """Strongly connected components with more than one module (Tarjan, iterative)."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter[0]
+        counter[0] += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            for w in it:
+                if w not in index:
+                    index[w] = low[w] = counter[0]
+                    counter[0] += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                    break
+                if w in on:
+                    low[v] = min(low[v], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = []
+                    while True:
+                        w = stack.pop()
+                        on.discard(w)
+                        comp.append(w)
+                        if w == v:
+                            break
+                    if len(comp) > 1:
+                        out.append(sorted(comp))
+    return out
+
+
+def test_cycle_finder_finds_a_cycle():
+    graph = {'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}, 'e': set()}
+    assert _cycles(graph) == [['a', 'b', 'c']]
+    assert _cycles({'a': {'b'}, 'b': set()}) == []
+
+
+def test_no_import_cycle_in_eha_ros():
+    modules = _modules()
+    graph = {m: _imports(m, p, modules) for m, p in modules.items()}
+    assert graph['eha_ros.core.sim.batch'], 'the import graph is empty: the parser is broken'
+    cycles = _cycles(graph)
+    print(f'{len(modules)} modules, {sum(map(len, graph.values()))} import edges, '
+          f'cycles: {cycles}')
+    assert cycles == []
+
+
+def test_core_never_imports_rclpy():
+    offenders = []
+    for module, path in _modules().items():
+        if not module.startswith('eha_ros.core'):
+            continue
+        for node in ast.walk(ast.parse(open(path, encoding='utf-8').read())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ''] if isinstance(node, ast.ImportFrom) else []
+            if any(n == 'rclpy' or n.startswith('rclpy.') for n in names):
+                offenders.append(module)
+    assert offenders == []
+
+
+def test_every_registered_node_has_its_executable_module_and_files():
+    from eha_ros.core.config.params import default_config_dir
+    cfg = default_config_dir()
+    for info in registry.NODES.values():
+        path = os.path.join(BASE, 'nodes', f'{info.name}.py')
+        assert os.path.isfile(path), info.name
+        assert 'def main(' in open(path, encoding='utf-8').read(), info.name
+        for f in info.files:
+            assert os.path.isfile(os.path.join(cfg, f)), (info.name, f)
+        if info.schema:
+            assert registry.schema_for(info.name).node == info.name
+    # the loop that eha_loop composes and the stack starts: plant sides first, then loop nodes
+    from eha_ros import stack
+    assert stack.LOOP_NODES == registry.PLANT_NODES + registry.LOOP_NODES
+    assert set(registry.LOOP_PREFIX) == set(registry.PLANT_NODES)
+
+
+def test_installed_executables_are_the_registry():
+    """setup.py reads its console scripts from the registry: the venv has each of them."""
+    import sys
+    bindir = os.path.dirname(sys.executable)
+    missing = [n.executable for n in registry.NODES.values()
+               if not os.path.exists(os.path.join(bindir, n.executable))]
+    assert missing == []
