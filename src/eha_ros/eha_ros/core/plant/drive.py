@@ -99,8 +99,8 @@ def delay_push(ring, head, n, w_ref):
 
 
 class SpeedDelay:
-    """Drive delay on the speed reference: FIFO of whole ticks (0 = none), :func:`delay_push`
-    on its own ring (the compiled plant step shares it)."""
+    """Drive delay on the speed reference: a FIFO of whole ticks (0 = none) as a ring that the
+    plant's compiled step advances with :func:`delay_push`."""
 
     def __init__(self, ticks: int, head=None):
         """head: a one-element array for the ring index (the plant's aux vector); its own
@@ -108,12 +108,4 @@ class SpeedDelay:
         self.ticks = ticks
         self.ring = np.zeros(max(ticks, 1))
         self.head = head if head is not None else np.zeros(1)
-        self.head[0] = 0.0
-
-    def push(self, w_ref: float) -> float:
-        """Insert this tick's reference, return the one applied now."""
-        return delay_push(self.ring, self.head, self.ticks, float(w_ref))
-
-    def reset(self):
-        self.ring[:] = 0.0
         self.head[0] = 0.0

@@ -84,17 +84,15 @@ class Fault:
 
 
 class FaultSet:
-    """Active faults; writes their effect into the input vector U and sensor fault vector.
-    ``table`` (rows F_*, the first ``n`` in use, in the order of ``active``) is what
-    :func:`apply_faults` reads, here and in the compiled plant step."""
+    """Active faults, kept as the table (rows F_*, the first ``n`` in use, in the order of
+    ``active``) that :func:`apply_faults` reads in the plant's compiled step."""
 
     def __init__(self, position_range: float = math.inf, count=None):
         """position_range (m): the position sensor's measuring range (the stroke), the largest
         |magnitude| of msp_bias, msp_noise and msp_drift (per second). count: a one-element
-        array that mirrors ``n`` for the compiled step (the plant's aux vector)."""
+        array that holds ``n`` (the plant's aux vector, where the compiled step reads it)."""
         self.active: dict[tuple[str, int], Fault] = {}
         self.table = np.zeros((MAX_FAULTS, 5))
-        self.n = 0
         self._count = count if count is not None else np.zeros(1)
         self.limits = dict.fromkeys(('msp_bias', 'msp_noise', 'msp_drift'), position_range)
 
@@ -142,8 +140,12 @@ class FaultSet:
     def _tabulate(self):
         for i, f in enumerate(self.active.values()):
             self.table[i] = (FAULT_CODES[f.name], f.channel, f.magnitude, f.t_start, f.t_end)
-        self.n = len(self.active)
-        self._count[0] = self.n
+        self._count[0] = len(self.active)
+
+    @property
+    def n(self) -> int:
+        """Rows of the table in use (the active faults)."""
+        return int(self._count[0])
 
     def due(self, t) -> bool:
         """A fault ends at or before t (apply deletes it)."""
@@ -155,8 +157,3 @@ class FaultSet:
             for key in [k for k, f in self.active.items() if f.t_end <= t + 1e-12]:
                 del self.active[key]
             self._tabulate()
-
-    def apply(self, t, U) -> None:
-        """Expire faults ending at or before t; write the remaining ones' effects into U."""
-        self.expire(t)
-        apply_faults(float(t), U, self.table, self.n)

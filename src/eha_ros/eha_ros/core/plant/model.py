@@ -153,7 +153,7 @@ class EhaPlant:
             raise ValueError(f'non-finite plant input omega_ref={omega_ref!r}, '
                              f'load_force={load_force!r}: expected finite numbers')
         faults = self.faults
-        if faults.n:
+        if faults.active:
             faults.expire(self.t)
         self._noise.refill()
         # stepper.step: the drive delay, the fault effects, this tick's noise row, the tick

@@ -3,7 +3,7 @@
 (Python does only the rare events: a fault expiring, a new noise block), and so do the
 closed-loop kernels (core.sim.closed_loop) for many ticks at once. Every array is the plant's
 own: S, U, the measurement, the noise block, the delay ring, the fault table and the aux
-vector of its scalars (A_*).
+vector of its scalars (A_*), so nothing is copied back after a segment.
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from numba import njit
 from ..jit_cache import drop_stale
 from . import layout as L
 from .drive import delay_push
-from .faults import MAX_FAULTS, apply_faults, expiring  # noqa: F401 (MAX_FAULTS: callers)
+from .faults import apply_faults, expiring
 from .integrator import tick
 from .sensors import BLOCK
 
@@ -37,13 +37,6 @@ def pack(plant):
     aux = plant._aux
     aux[A_ACTIVE] = plant.active_channel
     return aux, plant._delay.ring, plant.faults.table
-
-
-def unpack(plant, aux, ring, table) -> None:
-    """Nothing to copy back (the arrays are the plant's); the fault table is read-only in a
-    segment."""
-    if plant.faults.n != int(aux[A_NFAULT]):
-        raise RuntimeError('fault set changed inside a compiled segment')
 
 
 @njit(cache=True)

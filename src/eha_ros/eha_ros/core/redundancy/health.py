@@ -141,6 +141,21 @@ def health(k, mk, ms, hs, t, lo_ref, hi_ref, w_meas, i_meas, pa, pb, reported, f
         hysteresis(mk, ms, c, M_ESTIMATOR, t, innov, steady[c] and use and loop_ok)
 
 
+@njit(cache=True)
+def healthy(ms, c) -> bool:
+    """Every monitor of couple c is healthy."""
+    for j in range(ms.shape[1]):
+        if ms[c, j, MS_HEALTHY] < 0.5:
+            return False
+    return True
+
+
+@njit(cache=True)
+def available(ms, c) -> bool:
+    """The monitors judged in standby too (drive status, current) of couple c are healthy."""
+    return ms[c, M_DRIVE, MS_HEALTHY] > 0.5 and ms[c, M_CURRENT, MS_HEALTHY] > 0.5
+
+
 class Hysteresis:
     """Trip above ``trip`` held for ``trip_time``; clear below ``clear`` held for ``clear_time``
     (:func:`hysteresis` on row (c, j) of the arrays ``mk``, ``ms``; its own when not given)."""
@@ -209,10 +224,6 @@ class ChannelSample:
 class ChannelHealth:
     monitors: dict = field(default_factory=dict)     # name -> Hysteresis
 
-    @property
-    def healthy(self) -> bool:
-        return all(m.healthy for m in self.monitors.values())
-
 
 class HealthMonitor:
     """Both couples' monitors; :meth:`update` once per measured state (:func:`health`)."""
@@ -260,12 +271,11 @@ class HealthMonitor:
         return int(self.hs[H_IMPLAUSIBLE])
 
     def healthy(self, c: int) -> bool:
-        return self.channels[c].healthy
+        return bool(healthy(self.ms, c))
 
     def available(self, c: int) -> bool:
         """Monitors judged in standby too (drive status, current) are healthy."""
-        m = self.channels[c].monitors
-        return m['drive'].healthy and m['current'].healthy
+        return bool(available(self.ms, c))
 
     def rearm(self, c: int):
         """Forget the driving-only verdicts of couple c (before a commanded retry)."""

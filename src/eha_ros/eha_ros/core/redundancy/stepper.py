@@ -15,11 +15,10 @@ import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
-from .health import (K_BLANK, M_CURRENT, M_DRIVE, MONITORS, NH, NK, NMON,  # noqa: F401
-                     health)
+from .health import K_BLANK, available, health, healthy
 from .state_machine import ACTIVE, DEGRADED, FAILED_SAFE, SWITCHING
 
-drop_stale(__file__)         # supervise() inlines health.health
+drop_stale(__file__)         # supervise() inlines health's kernels
 
 STATES = (ACTIVE, SWITCHING, DEGRADED, FAILED_SAFE)
 ST_ACTIVE, ST_SWITCHING, ST_DEGRADED, ST_FAILED = range(4)
@@ -55,14 +54,6 @@ def unpack(mgr, ms, hs, g) -> None:
 
 
 @njit(cache=True)
-def healthy(ms, c) -> bool:
-    for j in range(ms.shape[1]):
-        if ms[c, j, 0] < 0.5:
-            return False
-    return True
-
-
-@njit(cache=True)
 def supervise(k, mk, ms, hs, g, t, seq, speed_ref, w_meas, i_meas, pa, pb, reported, fault,
               innovation, estimate_ok, steady, age, cmd) -> bool:
     """SwitchManager.update; False when the state machine would act (a transition, a valve or
@@ -82,8 +73,7 @@ def supervise(k, mk, ms, hs, g, t, seq, speed_ref, w_meas, i_meas, pa, pb, repor
         return True
     if state == ST_SWITCHING:       # _switching: target still available, no step due
         new = int(g[G_TARGET])
-        return (ms[new, M_DRIVE, 0] > 0.5 and ms[new, M_CURRENT, 0] > 0.5 and
-                g[G_NEXT_STEP] > t + 1e-9)
+        return available(ms, new) and g[G_NEXT_STEP] > t + 1e-9
     if not healthy(ms, a):
         return False
     o = 1 - a

@@ -10,14 +10,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..loop import safe_state as SAFE
-
 from ..config.params import default_config_dir, load
 from ..config.registry import NODE_FILES
-
+from ..loop import safe_state as SAFE
 
 
 def node_params(node: str, schema, config_dir: str | None = None, overrides=None) -> dict:
+    """A node's parameters from its files in config/ (the registry's), as the node loads them
+    (``overrides``: -p assignments, ``node:key`` or ``key``)."""
     config_dir = config_dir or default_config_dir()
     return load(schema, [os.path.join(config_dir, f) for f in NODE_FILES[node]], overrides or {},
                 node=node)
@@ -233,10 +233,7 @@ class BatchLoop:
         from ..plant import stepper as PS
         from ..redundancy import stepper as RS
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
-        packed = PS.pack(plant)
-        if packed is None:
-            return k
-        aux, ring, table = packed
+        aux, ring, table = PS.pack(plant)
         ek, ee, est_arrays = ES.pack(est) if est is not None else _dummy_estimator()
         ck, cc, ctl_arrays = CS.pack(ctl)
         hk, mk, ms, hs, g = RS.pack(mgr) if mgr is not None else _dummy_manager()
@@ -256,7 +253,6 @@ class BatchLoop:
                 break
             noise.refill()                    # the block is used up: the next one
         self.u = float(u)
-        PS.unpack(plant, aux, ring, table)
         if est is not None:
             ES.unpack(est, ee)
         CS.unpack(ctl, cc)
@@ -274,6 +270,8 @@ def _dummy_estimator():
 
 
 def _dummy_manager():
+    """Arrays of the switch manager's types when the loop has no manager."""
+    from ..redundancy import health as H
     from ..redundancy import stepper as RS
-    return (np.zeros(RS.NK), np.zeros((2, RS.NMON, 5)), np.zeros((2, RS.NMON, 3)),
-            np.zeros(RS.NH), np.zeros(RS.NG))
+    return (np.zeros(H.NK), np.zeros((2, H.NMON, 5)), np.zeros((2, H.NMON, 3)),
+            np.zeros(H.NH), np.zeros(RS.NG))
