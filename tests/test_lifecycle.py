@@ -91,9 +91,17 @@ def test_change_state_and_get_state_on_the_bridge_stack(ros_node, tmp_path):
         log = {}
         for step, (label, target) in enumerate((('activate', 0.003), ('deactivate', 0.0),
                                                 ('activate', 0.0))):
-            assert c.transition(label), (label, c.loop)
-            seen.append(c.state())
-            log[step] = plc_speeds(peer, lambda: c.reference(x0 + target, 1.5))
+            def change():
+                assert c.transition(label), (label, c.loop)
+                seen.append(c.state())
+            if label == 'activate':
+                # the loop acts from the activation on (the second time its reference is
+                # already x0): the PLC's speeds are logged from before it, not from whenever
+                # this thread gets to it after the two service calls
+                log[step] = plc_speeds(peer, lambda: (change(), c.reference(x0 + target, 1.5)))
+            else:
+                change()            # from its answer on: not a single command
+                log[step] = plc_speeds(peer, lambda: c.reference(x0 + target, 1.5))
             log[step, 'x'] = c.position() - x0
         assert not c.transition('configure')           # not a transition from 'active'
         print(f'states {seen}; PLC speed |max| while active {np.abs(log[0]).max():.0f} rad/s '
