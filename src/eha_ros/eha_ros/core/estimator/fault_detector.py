@@ -141,6 +141,8 @@ class FaultDetector:
                      drift_h, drift_debounce, int(round(hold_time / Ts)), jump_step,
                      jump_pressure_veto)
         self.s = np.zeros(NFS)
+        # compiled (or loaded) now: no_sample() is first called by a stale tick, mid-run
+        detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0), no_sample(self.k, self.s.copy())
 
     @classmethod
     def from_params(cls, p: dict, Ts: float) -> 'FaultDetector':

@@ -94,6 +94,7 @@ class FaultSet:
         self.active: dict[tuple[str, int], Fault] = {}
         self.table = np.zeros((MAX_FAULTS, 5))
         self._count = count if count is not None else np.zeros(1)
+        expiring(self.table, 0, 0.0)    # compiled (or loaded) now, not at a fault mid-run
         self.limits = dict.fromkeys(('msp_bias', 'msp_noise', 'msp_drift'), position_range)
 
     def inject(self, name, channel, magnitude, duration, t) -> tuple[bool, str]:

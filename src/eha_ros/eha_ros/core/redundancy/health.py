@@ -247,6 +247,8 @@ class HealthMonitor:
         self.reset_filters()
         self.hs[H_PLAUSIBLE] = 1.0
         self.hs[H_ACKED:H_ACKED + 2] = 1.0
+        # compiled (or loaded) now: available() is first called by a switch, mid-run
+        healthy(self.ms, 0), available(self.ms, 0)
         # per-call argument arrays of health(), filled in place
         self._w, self._i, self._age = np.zeros(2), np.zeros(2), np.zeros(2)
         self._rep, self._fault = np.zeros(2, np.bool_), np.zeros(2, np.bool_)
