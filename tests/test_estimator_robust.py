@@ -70,7 +70,7 @@ def test_adaptive_predict_is_the_ekf_with_the_leakage_jacobian(params):
     kf.P = A @ A.T / kf.n + np.diag(np.diag(kf.P))
     x0, P0 = kf.x.copy(), kf.P.copy()
     kf.predict(300.0, 19e5)
-    F, G = kf.modes[kf.mode]
+    F, G = kf.F, kf.G                  # the check-valve state's pair with its parameter columns
     Fj = F.copy()
     nl = kf._n_lin
     Fj[:nl, :nl] += 4.0 * kf.Dm[kf.mode * kf.n:kf.mode * kf.n + nl, :nl]

@@ -223,7 +223,7 @@ class ChamberKF(MeasuredKF):
         self.Lm = np.vstack(L)                      # (4 n, 2), rows of mode m at m n
         self.Dm = np.hstack((np.vstack(D), np.vstack(De)))   # (4 n, 2 n): lambda | epsilon
         self._Fj = np.zeros((n, n))
-        self.F, self.G = self.modes[0]
+        self.F, self.G = (a.copy() for a in self.modes[0])   # this tick's pair, copied in
         self.mode = 0
         self.Q = np.diag(np.asarray(q, float))
         self.P0 = np.diag(np.asarray(p0, float))
@@ -249,15 +249,15 @@ class ChamberKF(MeasuredKF):
 
     def reset(self, position: float = 0.0, p_a: float | None = None,
               p_b: float | None = None):
-        self.x = np.zeros(self.n)
+        kernels.refill(self, 'x', np.zeros(self.n))
         self.x[0] = position
         self.x[2] = self.c.p_acc if p_a is None else p_a
         self.x[3] = self.c.p_acc if p_b is None else p_b
-        self.P = self.P0.copy()
-        self.clipped = np.zeros(1)                  # adapt.project: clipping updates in a row
-        self.p_last = np.zeros(4)                   # adapt.pressure_increments
+        kernels.refill(self, 'P', self.P0)
+        kernels.refill(self, 'clipped', np.zeros(1))    # adapt.project: clipping updates in a row
+        kernels.refill(self, 'p_last', np.zeros(4))     # adapt.pressure_increments
         self.p_last[:2] = self.x[2:4]
-        self.fs = np.zeros(adapt.NFS)               # adapt.friction_input state
+        kernels.refill(self, 'fs', np.zeros(adapt.NFS))  # adapt.friction_input state
 
     def valve_mode(self) -> int:
         """Index into :attr:`modes` of the check-valve state the prior pressures give:
@@ -280,7 +280,7 @@ class ChamberKF(MeasuredKF):
             self.u[1] = friction_estimate(float(w), float(pd), bool(self.friction_uses_pressure),
                                           self.c.A_p, self.c.D_p, self.F_s, self.v_eps)
         self.mode = self.valve_mode()
-        self.F, self.G = self.modes[self.mode]
+        self.F[:], self.G[:] = self.modes[self.mode]
         if self.i_phi >= 0:
             adapt.friction_column(self.F, self.G, self._n_lin, self.i_phi, self.fs)
         if self.adaptive:

@@ -21,6 +21,7 @@ from . import adapt
 from . import fault_detector as fd
 from . import kernels
 from . import noise_level
+from . import stepper
 from .chamber_kf import ChamberKF, Circuit
 from .model_kf import HydroMech, ModelKF
 from .pva import PvaKF
@@ -167,6 +168,20 @@ class Estimator:
             self.chinniah = (Chinniah3(pp.m_p, pp.A_p, self.Ts), Chinniah4(pp.m_p, pp.A_p, self.Ts))
         self.counters = Counters()
         self.max_gap_ticks = 1000       # a longer gap is predicted over at most 1 s
+        # the compiled tick's constants, state and arrays (core.estimator.stepper): the state
+        # arrays above become views into its state vector, the scalars are read from it
+        self.kernel = stepper.pack(self)
+        k, e, _ = self.kernel
+        self.detector.s = e[stepper.E_FD:stepper.E_FD + fd.NFS]
+        self.monitor_s = e[stepper.E_MON:stepper.E_MON + adapt.NMS]
+        self.noise_s = e[stepper.E_NL:stepper.E_NL + noise_level.NNS]
+        self.flow_s = e[stepper.E_FLOWN:stepper.E_FLOWN + adapt.NFLOW]
+        self.offset_s = e[stepper.E_OFFS:stepper.E_OFFS + adapt.NOFS]
+        if self.chambers:
+            self.kf.p_last = e[stepper.E_PLAST:stepper.E_PLAST + 4]
+            self.kf.clipped = e[stepper.E_CLIPPED:stepper.E_CLIPPED + 1]
+            self.kf.fs = e[stepper.E_FS:stepper.E_FS + adapt.NFS]
+        self._predict_args = (k, e) + tuple(self.kernel[2][i] for i in stepper.PREDICT_ARRAYS)
         self.reset()
 
     def _noise_constants(self, p: dict, pp):
@@ -186,20 +201,32 @@ class Estimator:
             kf.Q[kf.i_gm, kf.i_gm] if with_gm else 0.0, kf.i_gm,
             p[e + 'adapt_quiet_velocity'] * pp.A_p / pp.D_p)
 
+    def _scalar(i, doc):
+        return property(lambda self: float(self.kernel[1][i]),
+                        lambda self, v: self.kernel[1].__setitem__(i, v), doc=doc)
+
+    omega_prev = _scalar(stepper.E_OMEGA, 'the motor speed of the previous sample (rad/s)')
+    w_fric = _scalar(stepper.E_WFRIC, 'low-passed pump speed: the friction sign of eq. 4.36')
+    pd_meas = _scalar(stepper.E_PD_MEAS, 'last good measured p_D (Pa)')
+    pd_filt = _scalar(stepper.E_PD_FILT, 'its low-pass, the model input (Pa)')
+    del _scalar
+
+    @property
+    def updates(self) -> int:
+        """Measurement updates so far."""
+        return int(self.kernel[1][stepper.E_UPDATES])
+
     def reset(self):
         self.started = False
         self._saved = None
-        self.omega_prev = 0.0
-        self.w_fric = 0.0           # low-passed pump speed: the friction sign of eq. 4.36
-        self.pd_meas = 0.0          # last good measured p_D
-        self.pd_filt = 0.0          # its low-pass (model input)
+        self.omega_prev = self.w_fric = self.pd_meas = self.pd_filt = 0.0
+        self.kernel[1][stepper.E_UPDATES] = 0.0
         self.detector.reset()
         self.monitor_s[:] = 0.0
         self.flow_s[:] = 0.0
         self.offset_s[:] = 0.0
         if self.noise_k is not None:
             noise_level.reset(self.noise_k, self.noise_s, self.kf.R, self.kf.R1, self.kf.Q)
-        self.updates = 0
 
     # ------------------------------------------------------------------ checks
     def _position_ok(self, x) -> bool:
@@ -250,9 +277,11 @@ class Estimator:
         else:
             self.counters.bump('invalid_states')
             w, pos_ok, pr_ok, reasons = self.omega_prev, False, False, ['invalid']
-        if pr_ok:
-            self.pd_meas = pressure_a - pressure_b
+        if not valid:
+            pressure_a = pressure_b = math.nan          # no evidence: p_D is not taken either
         if not self.started:
+            if pr_ok:
+                self.pd_meas = pressure_a - pressure_b
             if not pos_ok:
                 self.counters.bump('skipped_updates')
                 return self._result(0.0, 0.0, True, ','.join(reasons), 0)
@@ -265,68 +294,34 @@ class Estimator:
         if ticks > 1:
             noise_level.gap(self.noise_s)
         for _ in range(min(max(int(ticks), 1), self.max_gap_ticks) - 1):
-            self._predict(self.omega_prev)
-        self._predict(w)
-        if pr_ok:
-            self.pd_filt += self.alpha_pd * (self.pd_meas - self.pd_filt)
+            stepper.predict_tick(*self._predict_args, self.omega_prev)
         fault_before = self.detector.code
+        if pos_ok and not (self.isolate and fault_before in (fd.JUMP, fd.STUCK)):
+            k, e, a = self.kernel
+            _, y, nis, m, _ = stepper.estimate(k, e, *a, position, w, pressure_a, pressure_b)
+            if self.chinniah is not None and pr_ok:
+                self._chinniah_step(position)
+            return self._result(y, nis, False, ','.join(reasons), m)
+        stepper.advance(*self._predict_args, w, pressure_a, pressure_b)
+        noise_level.gap(self.noise_s)
+        self.counters.bump('skipped_updates')
         if not pos_ok:
-            noise_level.gap(self.noise_s)
             self.detector.tick_without_sample()
-            self.counters.bump('skipped_updates')
             return self._result(0.0, 0.0, True, ','.join(reasons), 0)
-        if self.isolate and fault_before in (fd.JUMP, fd.STUCK):
-            # sensor reported faulty: predict only, but keep watching its innovation
-            self.counters.bump('skipped_updates')
-            self.counters.bump('isolated_updates')
-            reasons.append('sensor_fault')
-            noise_level.gap(self.noise_s)
-            y, S = self.kf.innovation_only(position)
-            if pr_ok and self.use_pressure:
-                self.kf.update_pressures(pressure_a, pressure_b)   # the pressures still count
-            self.detector.update(position, y, S)
-            self._monitor(position)
-            return self._result(y, y * y / S, True, ','.join(reasons), 0)
-        if self.noise_k is not None:
-            kf = self.kf
-            noise_level.update(self.noise_k, self.noise_s, position, pressure_a, pressure_b,
-                               pr_ok and self.use_pressure, w, kf.R, kf.R1, kf.Q)
-        y, S, nis, m = self.kf.update(position, *((pressure_a, pressure_b)
-                                                  if pr_ok and self.use_pressure else ()))
-        self.updates += 1
-        pz = fd.pressure_z(self.kf.y, self.kf.S, m) if m > 1 else 0.0
-        self.detector.update(position, y, S, pz)
-        if self.chambers:
-            adapt.maneuver(self.kf.Q, self.i_load, pz, self.load_jump_z,
-                           self.q_load + self.kf.fs[adapt.FS_Q], self.q_load_jump)
-            kf = self.kf
-            b_sigma = self.b_dis * self.noise_s[noise_level.NS_SX]
-            adapt.offset_noise(kf.x, kf.i_gm, b_sigma, self.offset_s, *self.offset_alpha,
-                               self.offset_gate, kf.dp_friction)
-            if kf.i_flow >= 0:
-                rest = (kf.fs[adapt.FS_N] >= kf.fk[adapt.FK_NREST]
-                        and not adapt.load_varying(self.offset_s, kf.dp_friction))
-                adapt.flow_noise(
-                    kf.Q, kf.x, kf.i_flow, kf.i_gm, b_sigma, self.flow_k, self.q_flow, rest,
-                    self.flow_s, self.flow_n, kf.fk, kf.dp_friction, self.flow_share,
-                    self.flow_report)
+        # sensor reported faulty: predict only, but keep watching its innovation
+        self.counters.bump('isolated_updates')
+        reasons.append('sensor_fault')
+        y, S = self.kf.innovation_only(position)
+        if pr_ok and self.use_pressure:
+            self.kf.update_pressures(pressure_a, pressure_b)   # the pressures still count
+        self.detector.update(position, y, S)
         self._monitor(position)
-        if self.chinniah is not None and pr_ok:
-            self._chinniah_step(position)
-        return self._result(y, nis, False, ','.join(reasons), m)
+        return self._result(y, y * y / S, True, ','.join(reasons), 0)
 
     def _monitor(self, position: float) -> int:
-        """Consistency verdict of this update (adapt.monitor); the chamber filter's position
-        noise follows the disagreement (adapt.disagree_noise)."""
-        d = self.detector
-        v = adapt.monitor(self.monitor_k, self.monitor_s, position, self.kf.position,
-                          d.code, d.code == fd.DRIFT or self.flow_active or self.offset_open,
-                          getattr(self.kf, 'edge', 0))
-        if self.chambers:
-            adapt.disagree_noise(self.kf.Q, self.kf.x, self.kf.i_gm, self.b_dis, self.monitor_k,
-                                 self.monitor_s, self.kf.edge, self.q_x, self.q_x_disagree,
-                                 self.offset_open, self.q_x_offset)
-        return v
+        """Consistency verdict of this sample (stepper.consistency)."""
+        k, e, _ = self.kernel
+        return stepper.consistency(k, e, self.kf.x, self.kf.Q, position)
 
     @property
     def flow_active(self) -> bool:
@@ -370,19 +365,10 @@ class Estimator:
                 self._saved = (self.kf.x.copy(), self.kf.P.copy(), self.omega_prev,
                                self.w_fric, None if p_last is None else p_last.copy(),
                                None if p_last is None else self.kf.fs.copy())
-            self._predict(self.omega_prev)
+            stepper.predict_tick(*self._predict_args, self.omega_prev)
         noise_level.gap(self.noise_s)
         self.detector.tick_without_sample()
         return self._result(0.0, 0.0, True, 'stale', 0)
-
-    def _predict(self, w: float):
-        omega = 0.5 * (self.omega_prev + w)
-        self.omega_prev = w
-        if self.is_model:
-            self.w_fric += self.alpha_wf * (omega - self.w_fric)
-            self.kf.predict(omega, self.pd_filt if self.use_pressure else None, self.w_fric)
-        else:
-            self.kf.predict()
 
     def _chinniah_step(self, position: float):
         c3, c4 = self.chinniah

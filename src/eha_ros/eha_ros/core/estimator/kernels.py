@@ -157,6 +157,16 @@ def warm_up():
     update(x, P, np.eye(1, 3), np.eye(1), np.zeros(1), np.zeros(1), np.zeros((1, 1)))
 
 
+def refill(obj, name: str, value) -> None:
+    """``obj.<name> = value``, written into the array already there (the estimator's compiled
+    tick holds it, core.estimator.stepper)."""
+    a = getattr(obj, name, None)
+    if a is None:
+        setattr(obj, name, np.array(value, float))
+    else:
+        a[...] = value
+
+
 class StateView:
     """Position, velocity and position variance of a filter whose x = [x, x_dot, ...], P."""
 

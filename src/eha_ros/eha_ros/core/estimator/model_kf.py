@@ -260,10 +260,10 @@ class ModelKF(MeasuredKF):
     def reset(self, position: float = 0.0, p_a: float | None = None,
               p_b: float | None = None):
         """Initial state at ``position`` with p_D = p_a - p_b (0 without pressures)."""
-        self.x = np.zeros(self.n)
+        kernels.refill(self, 'x', np.zeros(self.n))
         self.x[0] = position
         self.x[2] = 0.0 if p_a is None else p_a - p_b
-        self.P = self.P0.copy()
+        kernels.refill(self, 'P', self.P0)
 
     def predict(self, omega: float, p_D: float | None = None, w_friction: float | None = None):
         """One Ts with the motor speed and the measured p_D (friction estimate of eq. 4.36,

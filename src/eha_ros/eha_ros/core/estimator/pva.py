@@ -34,8 +34,8 @@ class PvaKF(kernels.StateView):
 
     def reset(self, position: float = 0.0, p_a: float | None = None, p_b: float | None = None):
         """Initial state at ``position`` at rest (pressures unused: the PVA model has none)."""
-        self.x = np.array([position, 0.0, 0.0])
-        self.P = self.P0.copy()
+        kernels.refill(self, 'x', (position, 0.0, 0.0))
+        kernels.refill(self, 'P', self.P0)
 
     def predict(self, omega: float = 0.0, p_D: float | None = None):
         """One Ts of eq. 4.30 (inputs ignored: the PVA model has none)."""

@@ -1,10 +1,13 @@
-"""Estimator.update as one compiled call, for closed-loop kernels (core.sim.closed_loop).
+"""The estimator's tick, compiled: the one implementation of what Estimator.update does on a
+usable sample and of each prediction it makes; Estimator calls it per tick, the closed-loop
+kernels (core.sim.closed_loop) for many ticks at once.
 
-Covers the common path only: started, measurement valid (else counters and reasons: Python),
-one tick since the previous state, not isolating, no Chinniah pair. Same operations in the
-same order as the Python path (predict eq. 4.1-4.2 with eq. 4.36, Joseph update eq. 4.4-4.6,
-fault detector), so the results are bit-identical. Scalars live in a state vector (E_*), the
-filter's own arrays are shared; :func:`pack` / :func:`unpack` move the scalars.
+Python keeps the events: validity checks with their counters and reasons, the first sample,
+a sensor isolated as faulty, undoing provisional (stale) predictions, the Chinniah pair.
+Scalars live in a state vector (E_*) and the constants in K_*; the other arrays are the
+filter's own, and the Estimator's state arrays are views into E (nothing is copied per tick).
+Order: p_D measured, predict (eq. 4.1-4.2 with eq. 4.36), p_D low-pass, Joseph update
+(eq. 4.4-4.6), the adaptive parts, fault detector, consistency monitor.
 """
 from __future__ import annotations
 
@@ -56,13 +59,19 @@ NE = E_FD + fd.NFS
 E_CODE = E_FD + fd.FS_CODE
 
 
+# the arrays of pack() that predict_tick and advance take, in their order
+PREDICT_ARRAYS = (0, 1, 2, 3, 4, 5, 6, 15, 18, 19, 20)     # x P F G u Q tmp g_leak ws Fm Gm
+
+
 def supported(est) -> bool:
     """The compiled path covers this estimator's configuration."""
     return est.chinniah is None
 
 
 def pack(est):
-    """(constants, state, arrays) of an Estimator; arrays are the filter's own."""
+    """(constants, state, arrays) of an Estimator, built once when it is: the state holds a copy
+    of its state arrays (the Estimator then uses views into it), the arrays are the
+    filter's own. Its scalars (E_OMEGA .. E_UPDATES) are set by Estimator.reset."""
     kf, d = est.kf, est.detector
     k = np.zeros(NK)
     e = np.zeros(NE)
@@ -117,14 +126,11 @@ def pack(est):
     e[E_OFFS:E_OFFS + adapt.NOFS] = est.offset_s
     k[K_FD:K_FD + fd.NFK] = d.k
     e[E_FD:E_FD + fd.NFS] = d.s
-    e[E_OMEGA], e[E_PD_MEAS], e[E_PD_FILT] = est.omega_prev, est.pd_meas, est.pd_filt
-    e[E_WFRIC] = est.w_fric
-    e[E_UPDATES] = est.updates
     F, G = kf.F, kf.G
     Fm, Gm = np.zeros((1, 1)), np.zeros((1, 1))
     if est.chambers:
         e[E_MODE] = kf.mode
-        F, G = F.copy(), G.copy()           # overwritten per tick with the mode's pair
+        # F, G: the filter's own, overwritten per tick with the mode's pair
         # Gm: the stacked G (3 columns) then the unit-flow columns of adapt.parameter_columns
         # Fm: the stacked F, then the leakage sensitivities of lambda and epsilon
         # (adapt.predict_jacobian)
@@ -142,25 +148,6 @@ def pack(est):
     arrays = (kf.x, kf.P, F, G, u, kf.Q, kf._tmp, kf.H, kf.R, kf.y, kf.S, H1, R1, y1, S1,
               g_leak, np.zeros(kf.H.shape[0]), np.zeros(1), ws, Fm, Gm)
     return k, e, arrays
-
-
-def unpack(est, e) -> None:
-    est.omega_prev, est.pd_meas, est.pd_filt, est.w_fric = (
-        float(e[i]) for i in (E_OMEGA, E_PD_MEAS, E_PD_FILT, E_WFRIC))
-    est.updates = int(e[E_UPDATES])
-    est.detector.s[:] = e[E_FD:E_FD + fd.NFS]
-    est.monitor_s[:] = e[E_MON:E_MON + adapt.NMS]
-    est.noise_s[:] = e[E_NL:E_NL + noise_level.NNS]
-    est.flow_s[:] = e[E_FLOWN:E_FLOWN + adapt.NFLOW]
-    est.offset_s[:] = e[E_OFFS:E_OFFS + adapt.NOFS]
-    if est.chambers:
-        kf = est.kf
-        kf.edge = int(e[E_EDGE])
-        kf.p_last[:] = e[E_PLAST:E_PLAST + 4]
-        kf.clipped[0] = e[E_CLIPPED]
-        kf.fs[:] = e[E_FS:E_FS + adapt.NFS]
-        kf.mode = int(e[E_MODE])
-        kf.F, kf.G = kf.modes[kf.mode]
 
 
 @njit(cache=True)
@@ -188,13 +175,12 @@ def pressure_ok(k, pa, pb) -> bool:
 
 
 @njit(cache=True)
-def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm, z1, ws,
-             Fm, Gm, position, w, pa, pb):
-    """Estimator.update on a ready() measurement: (position, innovation, nis, nis_dim, code).
-    Chamber filter: (F, G) of the check-valve state are copied from the stacked Fm, Gm."""
-    pr_ok = pressure_ok(k, pa, pb)
-    if pr_ok:
-        e[E_PD_MEAS] = pa - pb
+def predict_tick(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w):
+    """One prediction over Ts with the motor speed averaged over the period (its previous
+    value and ``w``): the model's inputs (eq. 4.36 friction, or the chamber filter's Stribeck
+    curve, its check-valve state, friction and parameter columns), then eq. 4.1-4.2 (with the
+    leakage Jacobian when lambda is a state). Chamber filter: (F, G) of the check-valve state
+    are copied from the stacked Fm, Gm."""
     omega = 0.5 * (e[E_OMEGA] + w)
     e[E_OMEGA] = w
     use_p = k[K_USE_P] > 0.5
@@ -244,8 +230,46 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
                                Q, tmp)
     else:
         predict(x, P, F, G, u, Q, tmp)
+
+
+@njit(cache=True)
+def advance(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w, pa, pb) -> bool:
+    """A sample's prediction: its p_D (when the pressures are valid), :func:`predict_tick`
+    with ``w``, the p_D low-pass. Returns whether the pressures are valid."""
+    pr_ok = pressure_ok(k, pa, pb)
+    if pr_ok:
+        e[E_PD_MEAS] = pa - pb
+    predict_tick(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w)
     if pr_ok:
         e[E_PD_FILT] += k[K_ALPHA_PD] * (e[E_PD_MEAS] - e[E_PD_FILT])
+    return pr_ok
+
+
+@njit(cache=True)
+def consistency(k, e, x, Q, position) -> int:
+    """The consistency monitor's verdict on this sample (adapt.monitor); the chamber filter's
+    position noise follows the disagreement (adapt.disagree_noise)."""
+    flow = e[E_FLOWN + adapt.FL_ACTIVE] > 0.5
+    offset = e[E_OFFS + adapt.OF_OPEN] > 0.5
+    v = adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
+                      int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT or flow or offset,
+                      int(e[E_EDGE]))
+    if k[K_CHAMBERS] > 0.5:
+        adapt.disagree_noise(Q, x, int(k[K_IGM]), k[K_BDIS], k[K_MON:K_MON + adapt.NMK],
+                             e[E_MON:E_MON + adapt.NMS], int(e[E_EDGE]), k[K_QX], k[K_QXD],
+                             offset, k[K_QXO])
+    return v
+
+
+@njit(cache=True)
+def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm, z1, ws,
+             Fm, Gm, position, w, pa, pb):
+    """Estimator.update on a usable position sample (``w``: the speed it takes, the held one
+    when the sample's is not valid; invalid pressures are left out): :func:`advance`, the
+    update with position (and pressures), the adaptive parts, the fault detector and
+    :func:`consistency`. Returns (position, innovation, nis, nis_dim, code)."""
+    pr_ok = advance(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w, pa, pb)
+    use_p = k[K_USE_P] > 0.5
     iu = -1
     if k[K_CHAMBERS] > 0.5:
         iu = adapt.leakage_unexcited(x, int(k[K_ILAM]), k[K_PEXC])
@@ -291,13 +315,5 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
             Q, x, int(k[K_IFLOW]), int(k[K_IGM]), b_sigma, k[K_FLOWK], k[K_QFLOW], rest,
             e[E_FLOWN:E_FLOWN + adapt.NFLOW], k[K_FLOWN], k[K_FK:K_FK + adapt.NFK],
             k[K_FLOWDP], k[K_FLOWSH], k[K_FLOWREP])
-    flow = e[E_FLOWN + adapt.FL_ACTIVE] > 0.5
-    offset = e[E_OFFS + adapt.OF_OPEN] > 0.5
-    adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
-                  int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT or flow or offset,
-                  int(e[E_EDGE]))
-    if k[K_CHAMBERS] > 0.5:
-        adapt.disagree_noise(Q, x, int(k[K_IGM]), k[K_BDIS], k[K_MON:K_MON + adapt.NMK],
-                             e[E_MON:E_MON + adapt.NMS], int(e[E_EDGE]), k[K_QX], k[K_QXD],
-                             offset, k[K_QXO])
+    consistency(k, e, x, Q, position)
     return x[0], innov, nis, m, int(e[E_CODE])

@@ -41,7 +41,7 @@ def pack(plant):
 
 @njit(cache=True)
 def fault_due(aux, table) -> bool:
-    """A fault expires at this tick (FaultSet.apply would delete it): Python's business."""
+    """A fault expires at this tick (FaultSet.expire deletes it): Python's business."""
     return expiring(table, int(aux[A_NFAULT]), aux[A_T])
 
 

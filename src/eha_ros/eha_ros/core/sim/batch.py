@@ -229,12 +229,11 @@ class BatchLoop:
         """Compiled ticks k .. stop-1 until one needs Python; returns that tick (or stop)."""
         from . import closed_loop as CL
         from ..controller import stepper as CS
-        from ..estimator import stepper as ES
         from ..plant import stepper as PS
         from ..redundancy import stepper as RS
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
         aux, ring, table = PS.pack(plant)
-        ek, ee, est_arrays = ES.pack(est) if est is not None else _dummy_estimator()
+        ek, ee, est_arrays = est.kernel if est is not None else _dummy_estimator()
         ck, cc, ctl_arrays = CS.pack(ctl)
         hk, mk, ms, hs, g = RS.pack(mgr) if mgr is not None else _dummy_manager()
         u = self.u
@@ -253,8 +252,6 @@ class BatchLoop:
                 break
             noise.refill()                    # the block is used up: the next one
         self.u = float(u)
-        if est is not None:
-            ES.unpack(est, ee)
         CS.unpack(ctl, cc)
         if mgr is not None:
             RS.unpack(mgr, ms, hs, g)
