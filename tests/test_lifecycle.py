@@ -7,7 +7,6 @@ commands echoed into states, no plant physics): a step closes on it; its no_feed
 stops the drive and is reported. In a module of its own: it owns the /eha topics."""
 import multiprocessing
 import os
-import time
 
 import numpy as np
 import pytest
