@@ -151,6 +151,28 @@ def test_staleness_from_plc_cycle_counter():
     assert st.update(6, 0.012) and st.fresh(0.012)
 
 
+def test_each_sample_stands_for_the_plc_cycles_since_the_last():
+    """seq advanced by ``ticks`` keeps the PLC's time: a late loop cycle that finds the counter
+    5 on stands for 5 ticks; a repeat stands for 1, owed back by the next skipped cycle; the
+    counter wraps; a counter that went back (restarted PLC) is 1 tick, counted."""
+    st = Staleness(0.01, modulus=2 ** 32)
+    seq, seen = 0, []
+    for cycle in [10, 11, 11, 13, 14, 19, 19, 19, 20, 23, 24, 2 ** 32 - 1, 0, 1, 5, 6]:
+        st.update(cycle, 0.0)
+        seq += st.ticks
+        seen.append((cycle, st.ticks, seq - cycle))
+    assert [t for _, t, _ in seen] == [1, 1, 1, 1, 1, 5, 1, 1, 1, 1, 1, 1, 1, 1, 4, 1]
+    # seq - cycle: constant while the PLC and the loop agree; a repeat puts seq one ahead
+    # until a skipped cycle pays it back (the two repeats at 19 paid back at 23)
+    assert [d for _, _, d in seen][:11] == [-9, -9, -8, -9, -9, -9, -8, -7, -7, -9, -9]
+    assert len({d for _, _, d in seen[12:]}) == 1       # after the jump: in step again
+    # 24 -> 2**32 - 1 is a jump back (modulo 2**32: more than half the range): 1 tick; the wrap
+    # 2**32 - 1 -> 0 is one cycle
+    assert st.jumps == 1
+    st.restart()                                        # a new connection: count anew
+    assert st.update(1000, 1.0) and st.ticks == 1 and st.jumps == 1
+
+
 # ---------------------------------------------------------------- ADS link + peer
 @pytest.fixture(scope='module')
 def plant_params():

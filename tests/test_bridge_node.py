@@ -153,7 +153,11 @@ def speeds_logged(peer, seconds, action):
 def test_state_stream_through_ads(probe, peer):
     probe.states.clear()
     t0 = time.monotonic()
+    with peer.lock:
+        c0 = peer.plc.cycles
     assert wait_for(lambda: len(probe.states) > 1000, 30)
+    with peer.lock:
+        c1 = peer.plc.cycles
     rate = len(probe.states) / (time.monotonic() - t0)
     seqs = np.array([s.seq for s in probe.states])
     s = probe.states[-1]
@@ -167,6 +171,11 @@ def test_state_stream_through_ads(probe, peer):
     # How often depends on this test process (the PLC task shares it): 0.5 % idle, 11.6 % seen
     # under CI load; most samples must still be new
     assert np.all(np.diff(seqs) > 0) and repeats < 0.5
+    # seq keeps the PLC's time (core.hardware.staleness): a late bridge cycle moves it on by
+    # the PLC cycles it missed; the two spans differ by the stream's start/end latency only
+    span, cycles = int(seqs[-1] - seqs[0]), c1 - c0
+    print(f'seq span {span}, PLC cycles meanwhile {cycles}')
+    assert abs(span - cycles) <= 0.02 * cycles + 50
     assert abs(s.position - x) < 2e-4 and s.drive_enabled[0] and not s.drive_enabled[1]
     assert s.valve_open[0] and 0.5e6 < s.pressure_a < 3e6 and s.active_channel == 0
 

@@ -248,7 +248,8 @@ def test_drive_mismatch_of_the_velocity_loop():
 def test_tick_sync_pairs_references_with_their_estimates():
     """The controller node's lock-step pairing (core.controller.tick_sync): a tick-locked
     reference k waits for estimate k; in lock-step an estimate beyond the newest reference
-    waits for it, at most 50 ms (counted)."""
+    waits for it, at most ``wait`` (here 50 ms; counted); an untimed reference (seq 0, the
+    sweep's last) ends the tick-locked source."""
     from types import SimpleNamespace as E
     from eha_ros.core.controller.tick_sync import TickSync
     s = TickSync(lockstep=True, wait=0.05)
@@ -266,5 +267,12 @@ def test_tick_sync_pairs_references_with_their_estimates():
     assert s.c.get('reference_wait_timeouts', 0) == 1
     assert s.hold(E(seq=16), now=1.0) and s.pop_ready(1.0, force=True).seq == 16
     assert s.c.get('reference_wait_timeouts', 0) == 1   # forced: not a timeout
-    real_time = TickSync(lockstep=False)
+    # the sweep ends: its seq 0 drops the references still queued and releases held estimates
+    assert not s.reference(30, 6e-3, last_seq=16) and s.hold(E(seq=31), now=2.0)
+    assert s.pop_ready(2.0) is None
+    assert s.reference(0, 0.0, last_seq=16)
+    assert s.due(40) == [] and s.pop_ready(2.0).seq == 31
+    assert not s.hold(E(seq=32), now=2.0)               # no source: nothing waits
+    assert s.c.get('reference_wait_timeouts', 0) == 1
+    real_time = TickSync(lockstep=False, wait=0.05)
     assert not real_time.hold(E(seq=99), now=0.0)       # only lock-step waits

@@ -45,8 +45,9 @@ def feed(fault=None, at=2000, n=5000, realtime=True, every=20, **kw):
         sup.state(k, t)
         if fault == 'estimator' and late:
             continue
-        sup.estimate(k, fault == 'rejected' and late, False, t)
-        if fault == 'controller' and late or fault == 'lossy' and late and k % 4 == 0:
+        lag = fault == 'busy_estimator' and late     # its estimate(k) comes a tick later
+        sup.estimate(k - lag, fault == 'rejected' and late, False, t)
+        if fault in ('controller', 'busy_estimator') and late or fault == 'lossy' and late and k % 4 == 0:
             continue
         u = WMAX * math.copysign(1.0, math.sin(2 * math.pi * 6 * t)) \
             if fault == 'cycle' and late else 300.0 * math.sin(2 * math.pi * 0.5 * t)
@@ -70,6 +71,8 @@ def test_healthy_loop_never_trips():
 @pytest.mark.parametrize('fault,kind,node,ticks', [
     ('controller', STALLED, 'controller', 200), ('estimator', STALLED, 'estimator', 200),
     ('plant', STALLED, 'plant side', 200), ('rejected', REJECTED, None, 50),
+    # real time: the estimator a tick behind but not silent is busy, not the culprit
+    ('busy_estimator', STALLED, 'controller', 200),
     # 6 Hz bang-bang: the 4th reversal 3.5 half-periods in (+ the first half-period); a
     # quarter of the ticks unanswered: the 1 s window's share passes 2 % after 80 ticks
     ('cycle', LIMIT_CYCLE, None, 250), ('lossy', UNANSWERED, None, 80)])
@@ -115,6 +118,11 @@ def test_no_command_at_start_names_the_silent_node():
 # ---------------------------------------------------------------- the node over DDS
 MONITORS_OFF = [a for m in ('speed', 'current', 'pressure', 'estimator')
                 for a in ('-p', f'switch_manager:switch.health.{m}.enabled:=false')]
+# The feeder is a Python thread in the test process. On a loaded 2-core machine the manager
+# wakes to a backlog and may take state(k+1) before command(k): CI once saw "unanswered: 10 %
+# of the ticks" trip before the limit cycle. The unanswered check is the unit tests' (above)
+# and test_run_stack's business; here it is off (share > 1 never holds).
+UNANSWERED_OFF = ['-p', 'switch_manager:switch.supervisor.max_unanswered:=1.0']
 
 
 class Feeder(probes.Probe):
@@ -178,7 +186,7 @@ def test_node_trips_to_the_safe_state(ros_node, tmp_path, fault, kind):
         [__import__('eha_ros.stack', fromlist=['node_command']).node_command('switch_manager')[0],
          '--ros-args', '--params-file', _cfg('plant.yaml'), '--params-file',
          _cfg('switch_manager.yaml'), '-p', f'switch_manager:switch.node.log_dir:={tmp_path}']
-        + MONITORS_OFF)
+        + MONITORS_OFF + UNANSWERED_OFF)
     thread = threading.Thread(target=feeder.run, daemon=True)
     try:
         wait_matched(*feeder.pubs)

@@ -60,6 +60,7 @@ def make_node(params: dict):
             self.safe = None                    # why in the safe state (core.loop.safe_state)
             self.manager_state = None           # from eha/redundancy
             self.last_seq = 0
+            self.warned_wait = False            # reference_wait_timeouts logged (once)
             self.last_speed = 0.0
             self.answer = None                  # (seq, speed, saturated, stamp) of the last command
             self.active_channel = None
@@ -67,7 +68,8 @@ def make_node(params: dict):
             self.idle = False                   # inactive: the next fresh estimate restarts
             self.enabled = False                # own lifecycle state ACTIVE
             self.lockstep = bool(self.get_parameter('use_sim_time').value)
-            self.sync = TickSync(self.lockstep, counters=self.c)   # references <-> estimates
+            self.sync = TickSync(self.lockstep, wait=p['control.reference_wait'],
+                                 counters=self.c)                 # references <-> estimates
             self.loop = LoopStats(self.Ts)
             self.cmd = ActuatorCommand()
             qos = stream_qos()
@@ -144,8 +146,7 @@ def make_node(params: dict):
             estimate of tick k is handled, so reference timing does not depend on DDS order."""
             if self.sync.reference(msg.seq, msg.position, self.last_seq):
                 self.apply_reference(msg.position)
-            else:
-                self.release_held()
+            self.release_held()
 
         def apply_reference(self, position):
             clamped = self.c.get('clamped_references', 0)
@@ -199,6 +200,13 @@ def make_node(params: dict):
 
         def release_held(self, force=False):
             while (msg := self.sync.pop_ready(time.monotonic(), force)) is not None:
+                if self.c.get('reference_wait_timeouts', 0) == 1 and not self.warned_wait:
+                    self.warned_wait = True
+                    self.get_logger().warn(
+                        f'seq {msg.seq}: no reference of its tick from the sweep after '
+                        f'{self.sync.wait:g} s (control.reference_wait): going on with the '
+                        f'last one (counted as reference_wait_timeouts; timing not '
+                        f'deterministic from here)')
                 self.process_estimate(msg)
 
         def process_estimate(self, msg):

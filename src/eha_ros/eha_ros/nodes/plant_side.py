@@ -475,7 +475,7 @@ def make_node(params: dict, program: Program):
                 self.fill_state(r)
                 fresh = self.hw.fresh(now)
             with self.lock:
-                self.k += 1
+                self.k += r.ticks                 # device cycles (ads: a late cycle skips some)
                 self.gate.set_data(fresh, r.active_fault)
                 armed = self.gate.armed
             self.publish_state()

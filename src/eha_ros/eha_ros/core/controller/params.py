@@ -30,6 +30,11 @@ NODE = Schema('controller', TF + [
           doc='Tustin prewarp frequency; 0 = plain Tustin'),
     Param('control.watchdog_ticks', 'int', '', 5, 1, 1000,
           doc='no (or stale) estimate for more ticks: zero speed, reported'),
+    Param('control.reference_wait', 'float', 's', 1.0, 0.001, 60.0,
+          doc='lock-step only: how long (wall time) an estimate waits for the reference of '
+              'its tick from a tick-locked source (the sweep) before it goes on with the '
+              'last one (counted as reference_wait_timeouts, WARN once); a starved process '
+              'is late by tens of ms on a loaded machine, a dead one never answers'),
     Param('control.switch_hold', 'float', 's', 0.0, 0.0, 1.0,
           doc='state of G frozen this long after the active channel changes'),
     Param('control.drive_check_tolerance', 'float', '', 0.01, 0.0, 1.0,

@@ -5,7 +5,10 @@ One sum read/write request per tick: ``write`` sends the command block (speed, r
 command, heartbeat) and receives the state block, ``read`` decodes it. A sample whose PLC
 cycle counter did not move since the last one (the PLC has not run a cycle in between, e.g.
 catch-up ticks after an overrun) is a repeat: published not valid, so the estimator predicts
-instead of taking it as a frozen sensor. ``link_loss_cycles`` failed requests in a row: link
+instead of taking it as a frozen sensor. A sample the PLC took several cycles after the last
+one (a late loop cycle) stands for that many ticks (``Reading.ticks``, core.hardware.staleness):
+the state's seq moves on by as many, so the estimator predicts over the cycles it did not see
+instead of taking the move for a sensor jump. ``link_loss_cycles`` failed requests in a row: link
 lost (the gate disarms and latches); ``reconnect`` retries every ``reconnect_period``.
 """
 from __future__ import annotations
@@ -33,7 +36,7 @@ class AdsHardware(Hardware):
         self.smap = load_symbol_map(resolve_path(p['bridge.symbol_map'], default_config_dir()))
         self.link = AdsLink(self.smap, p['ads.ams_net_id'], p['ads.ams_port'], p['ads.host'],
                             p['ads.tcp_port'], p['ads.timeout'], p['ads.sum_mode'])
-        self.staleness = Staleness(stale_limit)
+        self.staleness = Staleness(stale_limit, 2 ** (8 * self.smap['plc_cycle'].size))
         self.hb = 0
         self.hb_mod = int_range(self.smap['heartbeat'].fmt)[1] + 1
         self.select_block = None                 # channel_cmd ... bypass_cmd as last commanded
@@ -74,6 +77,7 @@ class AdsHardware(Hardware):
                 'bypass_cmd')}
         self.connected, self.fails, self.lost = True, 0, ''
         self.raw = None
+        self.staleness.restart()                 # the PLC's counter may have restarted
 
     # ---- the loop
     @property
@@ -140,6 +144,9 @@ class AdsHardware(Hardware):
         new = self.read_ok and self.staleness.update(int(v['plc_cycle']), now)
         if self.read_ok and not new:
             self.c.bump('repeated_samples')
+        r.ticks = self.staleness.ticks if self.read_ok else 1
+        if r.ticks > 1:
+            self.c.bump('skipped_plc_cycles', r.ticks - 1)
         r.position = float(v['position'])
         r.pressure_a, r.pressure_b = float(v['pressure_a']), float(v['pressure_b'])
         ch = int(v['active_channel'])
@@ -167,4 +174,4 @@ class AdsHardware(Hardware):
 
     def values(self, now: float) -> dict:
         return {'plc': self.link.address, 'heartbeat': self.hb, 'ads_requests': self.link.requests,
-                'data_age_s': self.staleness.age(now)}
+                'data_age_s': self.staleness.age(now), 'plc_cycle_jumps': self.staleness.jumps}

@@ -19,6 +19,7 @@ class Reading:
     active_channel: int = 0
     bypass_open: bool = False
     valid: bool = True                  # a new, trustworthy sample (else: predict only)
+    ticks: int = 1                      # loop periods Ts this reading stands for (device cycles)
     active_fault: bool = False          # the active couple's drive reports a fault
     motor_speed: list = field(default_factory=lambda: [0.0, 0.0])
     motor_current: list = field(default_factory=lambda: [0.0, 0.0])

@@ -155,13 +155,15 @@ class LoopSupervisor:
                    if now - max(self.last[name] or now, self.watch_since, self.judged_from)
                    > self.stall_timeout]
         if stalled:
-            # the culprit: the first link behind its upstream (lock-step: everything waits
-            # for it), else the plant side itself
-            node, name = STREAMS[0][1], 'state'
-            for (up, _), (down, who) in zip(STREAMS, STREAMS[1:]):
-                if self.seq[down] < self.seq[up]:
-                    node, name = who, down
+            # the culprit: the first silent link behind its upstream (lock-step: everything
+            # waits for it; real time: a link one tick behind but not silent is only busy),
+            # else the first silent stream (the plant side when the states stopped)
+            name = stalled[0]
+            for (up, _), (down, _) in zip(STREAMS, STREAMS[1:]):
+                if down in stalled and self.seq[down] < self.seq[up]:
+                    name = down
                     break
+            node = dict(STREAMS)[name]
             silent_s = now - (self.last[name] or self.judged_from)
             self._trip(STALLED, f'{node} stalled: no new {name} for '
                                 f'{silent_s:.2f} s (newest seq {self.seq[name]}, '
