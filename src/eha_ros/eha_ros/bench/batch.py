@@ -181,22 +181,19 @@ def components(rec, refs, loads, repeats: int = 3) -> dict:
 
 @njit(cache=True)
 def _estimator(ek, ee, ea, x, w, pa, pb):
-    xs, Pe, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, z2, z1, ws, Fm, Gm = ea
     s = 0.0
     for k in range(x.shape[0]):
-        r = ES.estimate(ek, ee, xs, Pe, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, z2,
-                        z1, ws, Fm, Gm, x[k], w[k], pa[k], pb[k])
+        r = ES.estimate(ek, ee, ea, x[k], w[k], pa[k], pb[k])
         s += r[0]
     return s
 
 
 @njit(cache=True)
 def _controller(ck, cc, ca, refs, x_hat):
-    Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt = ca
     s = 0.0
     for k in range(refs.shape[0]):
         CS.request(ck, cc, refs[k])
-        s += CS.control(ck, cc, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt, x_hat[k])
+        s += CS.control(ck, cc, ca, x_hat[k])
     return s
 
 

@@ -155,6 +155,7 @@ def make_node(params: dict):
                            'position_variance_m2': self.est.kf.position_variance})
             values.update(self.c)
             values.update({f'estimator_{k}': v for k, v in self.est.counters.items()})
+            values['estimator_updates'] = self.est.updates      # beside skipped/isolated_updates
             for code, n in self.est.detector.detections.items():
                 values[f'detections_{NAMES[code]}'] = n
             if self.est.is_model and self.est.kf.i_leak is not None:

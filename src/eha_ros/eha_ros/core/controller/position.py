@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg, signal
 
+from ..kernel_records import entry_point
 from ..qft.lti import from_num_den
 from ..loop.stats import Counters
 from . import stepper as S
@@ -79,6 +80,7 @@ class PositionController:
             self.L = np.zeros(self.G.n)
         self.k[S.K_WMAX], self.k[S.K_FDD], self.k[S.K_GDD] = omega_max, self.F._dd, self.G._dd
         self._arrays = S.pack(self)[2]     # F, G and L arrays: changed in place, never replaced
+        self._control = entry_point(S.control, self.k, self.s, self._arrays, 0.0)   # per tick
 
     @classmethod
     def from_params(cls, p: dict, counters: Counters | None = None) -> 'PositionController':
@@ -124,7 +126,7 @@ class PositionController:
     def update(self, position_estimate: float) -> ControlOutput:
         if not self.started:
             self.start(position_estimate)
-        u_sat = S.control(self.k, self.s, *self._arrays, float(position_estimate))
+        u_sat = self._control(self.k, self.s, self._arrays, float(position_estimate))
         S.unpack(self, self.s)
         s = self.s
         return ControlOutput(float(u_sat), bool(s[S.C_CLAMPED]), float(s[S.C_R]),

@@ -5,16 +5,19 @@ acceleration limit), prefilter F, controller G with observer-form anti-windup, s
 call) run these same functions on the same arrays, so both paths agree bit for bit.
 
 Scalars live in two vectors owned by the controller: constants ``k`` (K_*) and state ``c``
-(C_*); F's and G's states are the DiscreteSS objects' own arrays.
+(C_*); F's and G's matrices and states are the DiscreteSS objects' own arrays, named in one
+record (:class:`Arrays`).
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
+from ..kernel_records import Matrix, Vector
 from .discrete import ss_advance, ss_output, ss_step
 
 drop_stale(__file__)
@@ -37,11 +40,27 @@ def new_arrays(limit: float, step: float, vmax: float, accel: float, Ts: float):
     return k, c
 
 
+class Arrays(NamedTuple):
+    """The prefilter's and the controller's arrays (DiscreteSS: A, B, C, state, scratch) and
+    the anti-windup gain L: the PositionController's own (:func:`pack`)."""
+    Fa: Matrix
+    Fb: Vector
+    Fc: Vector
+    Fx: Vector
+    Ft: Vector
+    Ga: Matrix
+    Gb: Vector
+    Gc: Vector
+    Gl: Vector
+    Gx: Vector
+    Gt: Vector
+
+
 def pack(ctl):
     """(constants, state, arrays) of a PositionController: its own arrays, not copies."""
     F, G = ctl.F, ctl.G
-    return ctl.k, ctl.s, (F._ad, F._bd, F._cd, F.x, F._tmp,
-                          G._ad, G._bd, G._cd, ctl.L, G.x, G._tmp)
+    return ctl.k, ctl.s, Arrays(F._ad, F._bd, F._cd, F.x, F._tmp,
+                                G._ad, G._bd, G._cd, ctl.L, G.x, G._tmp)
 
 
 def unpack(ctl, c) -> None:
@@ -94,13 +113,14 @@ def shape(k, c) -> float:
 
 
 @njit(cache=True)
-def control(k, c, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt, x_hat):
+def control(k, c, a, x_hat):
     """PositionController.update(x_hat) of a started controller; returns the clamped speed.
 
     u[k] = C x[k] + D e[k],  u_s[k] = clip(u[k], +-omega_max)
     x[k+1] = A x[k] + B e[k] + L (u_s[k] - u[k])       (observer form, core.controller.antiwindup)
     Unclamped, L (u_s - u) = 0: exactly Tustin(G). During an integrator hold (channel switch)
-    x is frozen and the output follows e through D only."""
+    x is frozen and the output follows e through D only. ``a``: the :class:`Arrays`."""
+    Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt = a
     r = ss_step(Fa, Fb, Fc, k[K_FDD], Fx, shape(k, c), Ft)
     e = r - x_hat
     u = ss_output(Gc, k[K_GDD], Gx, e)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..kernel_records import entry_point
 from ..plant.parameters import PlantParams
 from ..loop.stats import Counters
 from . import adapt
@@ -181,7 +182,13 @@ class Estimator:
             self.kf.p_last = e[stepper.E_PLAST:stepper.E_PLAST + 4]
             self.kf.clipped = e[stepper.E_CLIPPED:stepper.E_CLIPPED + 1]
             self.kf.fs = e[stepper.E_FS:stepper.E_FS + adapt.NFS]
-        self._predict_args = (k, e) + tuple(self.kernel[2][i] for i in stepper.PREDICT_ARRAYS)
+        # the kernels' compiled functions for these arrays, called per tick (the record is
+        # not typed again on every call: kernel_records.entry_point)
+        kn = self.kernel
+        self._estimate = entry_point(stepper.estimate, *kn, 0.0, 0.0, 0.0, 0.0)
+        self._predict_tick = entry_point(stepper.predict_tick, *kn, 0.0)
+        self._advance = entry_point(stepper.advance, *kn, 0.0, 0.0, 0.0)
+        self._consistency = entry_point(stepper.consistency, *kn, 0.0)
         self.reset()
 
     def _noise_constants(self, p: dict, pp):
@@ -294,15 +301,14 @@ class Estimator:
         if ticks > 1:
             noise_level.gap(self.noise_s)
         for _ in range(min(max(int(ticks), 1), self.max_gap_ticks) - 1):
-            stepper.predict_tick(*self._predict_args, self.omega_prev)
+            self._predict_tick(*self.kernel, self.omega_prev)
         fault_before = self.detector.code
         if pos_ok and not (self.isolate and fault_before in (fd.JUMP, fd.STUCK)):
-            k, e, a = self.kernel
-            _, y, nis, m, _ = stepper.estimate(k, e, *a, position, w, pressure_a, pressure_b)
+            _, y, nis, m, _ = self._estimate(*self.kernel, position, w, pressure_a, pressure_b)
             if self.chinniah is not None and pr_ok:
                 self._chinniah_step(position)
             return self._result(y, nis, False, ','.join(reasons), m)
-        stepper.advance(*self._predict_args, w, pressure_a, pressure_b)
+        self._advance(*self.kernel, w, pressure_a, pressure_b)
         noise_level.gap(self.noise_s)
         self.counters.bump('skipped_updates')
         if not pos_ok:
@@ -320,8 +326,7 @@ class Estimator:
 
     def _monitor(self, position: float) -> int:
         """Consistency verdict of this sample (stepper.consistency)."""
-        k, e, _ = self.kernel
-        return stepper.consistency(k, e, self.kf.x, self.kf.Q, position)
+        return self._consistency(*self.kernel, position)
 
     @property
     def flow_active(self) -> bool:
@@ -365,7 +370,7 @@ class Estimator:
                 self._saved = (self.kf.x.copy(), self.kf.P.copy(), self.omega_prev,
                                self.w_fric, None if p_last is None else p_last.copy(),
                                None if p_last is None else self.kf.fs.copy())
-            stepper.predict_tick(*self._predict_args, self.omega_prev)
+            self._predict_tick(*self.kernel, self.omega_prev)
         noise_level.gap(self.noise_s)
         self.detector.tick_without_sample()
         return self._result(0.0, 0.0, True, 'stale', 0)

@@ -5,18 +5,21 @@ kernels (core.sim.closed_loop) for many ticks at once.
 Python keeps the events: validity checks with their counters and reasons, the first sample,
 a sensor isolated as faulty, undoing provisional (stale) predictions, the Chinniah pair.
 Scalars live in a state vector (E_*) and the constants in K_*; the other arrays are the
-filter's own, and the Estimator's state arrays are views into E (nothing is copied per tick).
+filter's own, named in one record (:class:`Arrays`), and the Estimator's state arrays are views
+into E (nothing is copied per tick).
 Order: p_D measured, predict (eq. 4.1-4.2 with eq. 4.36), p_D low-pass, Joseph update
 (eq. 4.4-4.6), the adaptive parts, fault detector, consistency monitor.
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
+from ..kernel_records import Matrix, Vector
 from . import adapt
 from . import fault_detector as fd
 from . import noise_level
@@ -59,8 +62,29 @@ NE = E_FD + fd.NFS
 E_CODE = E_FD + fd.FS_CODE
 
 
-# the arrays of pack() that predict_tick and advance take, in their order
-PREDICT_ARRAYS = (0, 1, 2, 3, 4, 5, 6, 15, 18, 19, 20)     # x P F G u Q tmp g_leak ws Fm Gm
+class Arrays(NamedTuple):
+    """The filter's own arrays the kernels work on (:func:`pack`; never copies)."""
+    x: Vector           # state estimate
+    P: Matrix           # its covariance
+    F: Matrix           # transition of this tick (the check-valve state's, with columns)
+    G: Matrix           # input matrix of this tick
+    u: Vector           # input: motor speed, friction (eq. 4.36 or Stribeck)
+    Q: Matrix           # process noise (adaptive parts write into it)
+    tmp: Matrix         # predict's workspace
+    H: Matrix           # measurement model: position and pressures
+    R: Matrix           # its noise
+    y: Vector           # its innovation
+    S: Matrix           # its innovation covariance
+    H1: Matrix          # position only (the pressures not valid)
+    R1: Matrix
+    y1: Vector
+    S1: Matrix
+    g_leak: Vector      # eq. 4.35 filter: the leakage column's sensitivities
+    zm: Vector          # measurement vector (position and pressures)
+    z1: Vector          # position only
+    ws: Vector          # update's workspace
+    Fm: Matrix          # chamber filter: stacked F of the check-valve states, leakage columns
+    Gm: Matrix          # stacked G, unit-flow columns (adapt.parameter_columns)
 
 
 def supported(est) -> bool:
@@ -145,8 +169,8 @@ def pack(est):
         u, g_leak = kf._u, np.zeros(1)
         H1, R1, y1, S1 = kf.H, kf.R, kf.y, kf.S
     ws = np.zeros(workspace_size(len(kf.x), 3))
-    arrays = (kf.x, kf.P, F, G, u, kf.Q, kf._tmp, kf.H, kf.R, kf.y, kf.S, H1, R1, y1, S1,
-              g_leak, np.zeros(kf.H.shape[0]), np.zeros(1), ws, Fm, Gm)
+    arrays = Arrays(kf.x, kf.P, F, G, u, kf.Q, kf._tmp, kf.H, kf.R, kf.y, kf.S, H1, R1, y1, S1,
+                    g_leak, np.zeros(kf.H.shape[0]), np.zeros(1), ws, Fm, Gm)
     return k, e, arrays
 
 
@@ -175,12 +199,14 @@ def pressure_ok(k, pa, pb) -> bool:
 
 
 @njit(cache=True)
-def predict_tick(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w):
+def predict_tick(k, e, a, w):
     """One prediction over Ts with the motor speed averaged over the period (its previous
     value and ``w``): the model's inputs (eq. 4.36 friction, or the chamber filter's Stribeck
     curve, its check-valve state, friction and parameter columns), then eq. 4.1-4.2 (with the
     leakage Jacobian when lambda is a state). Chamber filter: (F, G) of the check-valve state
-    are copied from the stacked Fm, Gm."""
+    are copied from the stacked Fm, Gm. ``a``: the :class:`Arrays`."""
+    x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm = (a.x, a.P, a.F, a.G, a.u, a.Q, a.tmp,
+                                                 a.g_leak, a.ws, a.Fm, a.Gm)
     omega = 0.5 * (e[E_OMEGA] + w)
     e[E_OMEGA] = w
     use_p = k[K_USE_P] > 0.5
@@ -233,22 +259,23 @@ def predict_tick(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w):
 
 
 @njit(cache=True)
-def advance(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w, pa, pb) -> bool:
+def advance(k, e, a, w, pa, pb) -> bool:
     """A sample's prediction: its p_D (when the pressures are valid), :func:`predict_tick`
     with ``w``, the p_D low-pass. Returns whether the pressures are valid."""
     pr_ok = pressure_ok(k, pa, pb)
     if pr_ok:
         e[E_PD_MEAS] = pa - pb
-    predict_tick(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w)
+    predict_tick(k, e, a, w)
     if pr_ok:
         e[E_PD_FILT] += k[K_ALPHA_PD] * (e[E_PD_MEAS] - e[E_PD_FILT])
     return pr_ok
 
 
 @njit(cache=True)
-def consistency(k, e, x, Q, position) -> int:
+def consistency(k, e, a, position) -> int:
     """The consistency monitor's verdict on this sample (adapt.monitor); the chamber filter's
     position noise follows the disagreement (adapt.disagree_noise)."""
+    x, Q = a.x, a.Q
     flow = e[E_FLOWN + adapt.FL_ACTIVE] > 0.5
     offset = e[E_OFFS + adapt.OF_OPEN] > 0.5
     v = adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
@@ -262,13 +289,14 @@ def consistency(k, e, x, Q, position) -> int:
 
 
 @njit(cache=True)
-def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm, z1, ws,
-             Fm, Gm, position, w, pa, pb):
+def estimate(k, e, a, position, w, pa, pb):
     """Estimator.update on a usable position sample (``w``: the speed it takes, the held one
     when the sample's is not valid; invalid pressures are left out): :func:`advance`, the
     update with position (and pressures), the adaptive parts, the fault detector and
     :func:`consistency`. Returns (position, innovation, nis, nis_dim, code)."""
-    pr_ok = advance(k, e, x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm, w, pa, pb)
+    pr_ok = advance(k, e, a, w, pa, pb)
+    x, P, Q, H, R, y, S, H1, R1, y1, S1, zm, z1, ws = (a.x, a.P, a.Q, a.H, a.R, a.y, a.S, a.H1,
+                                                       a.R1, a.y1, a.S1, a.zm, a.z1, a.ws)
     use_p = k[K_USE_P] > 0.5
     iu = -1
     if k[K_CHAMBERS] > 0.5:
@@ -315,5 +343,5 @@ def estimate(k, e, x, P, F, G, u, Q, tmp, H, R, y, S, H1, R1, y1, S1, g_leak, zm
             Q, x, int(k[K_IFLOW]), int(k[K_IGM]), b_sigma, k[K_FLOWK], k[K_QFLOW], rest,
             e[E_FLOWN:E_FLOWN + adapt.NFLOW], k[K_FLOWN], k[K_FK:K_FK + adapt.NFK],
             k[K_FLOWDP], k[K_FLOWSH], k[K_FLOWREP])
-    consistency(k, e, x, Q, position)
+    consistency(k, e, a, position)
     return x[0], innov, nis, m, int(e[E_CODE])

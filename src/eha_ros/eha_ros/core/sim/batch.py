@@ -233,8 +233,8 @@ class BatchLoop:
         from ..redundancy import stepper as RS
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
         aux, ring, table = PS.pack(plant)
-        ek, ee, est_arrays = est.kernel if est is not None else _dummy_estimator()
-        ck, cc, ctl_arrays = CS.pack(ctl)
+        est_kernel = est.kernel if est is not None else _dummy_estimator()
+        ctl_kernel = CS.pack(ctl)
         hk, mk, ms, hs, g = RS.pack(mgr) if mgr is not None else _dummy_manager()
         u = self.u
         noise = plant._noise
@@ -243,8 +243,8 @@ class BatchLoop:
                   table)
             k0 = k
             k, why, u = CL.segment(k, stop, off, self.Ts, refs, loads, pl, plant._nsub,
-                                   (ek, ee) + est_arrays, est is not None,
-                                   (ck, cc) + ctl_arrays, (hk, mk, ms, hs, g), mgr is not None,
+                                   est_kernel, est is not None,
+                                   ctl_kernel, (hk, mk, ms, hs, g), mgr is not None,
                                    u, rec)
             self.segments += 1
             self.fast_ticks += k - k0
@@ -252,7 +252,7 @@ class BatchLoop:
                 break
             noise.refill()                    # the block is used up: the next one
         self.u = float(u)
-        CS.unpack(ctl, cc)
+        CS.unpack(ctl, ctl.s)
         if mgr is not None:
             RS.unpack(mgr, ms, hs, g)
         return k
@@ -261,9 +261,8 @@ class BatchLoop:
 def _dummy_estimator():
     """Arrays of the estimator stepper's types when the loop has no estimator."""
     from ..estimator import stepper as ES
-    v, m = np.zeros(2), np.zeros((2, 2))
-    return np.zeros(ES.NK), np.zeros(ES.NE), (v, m, m, m, v, m, m, m, m, v, m, m, m, v, m, v,
-                                             v, v, v, m, m)
+    from ..kernel_records import placeholder
+    return np.zeros(ES.NK), np.zeros(ES.NE), placeholder(ES.Arrays)
 
 
 def _dummy_manager():

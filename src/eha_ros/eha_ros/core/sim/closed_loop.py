@@ -88,8 +88,9 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
     Python's) / NOISE (draw the next noise block, call again), u the last command.
     """
     S, P, U, T, block, meas, aux, ring, table = plant
-    ek, ee, x, Pe, F, G, ue, Q, tmp, H, R, y, Sy, H1, R1, y1, S1, g_leak, z2, z1, ws, Fm, Gm = est
-    ck, cc, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt = ctl
+    ek, ee, ea = est                    # estimator stepper: constants, state, Arrays
+    ck, cc, ca = ctl                    # controller stepper: constants, state, Arrays
+    x, Pe, Q, Fx, Gx = ea.x, ea.P, ea.Q, ca.Fx, ca.Gx
     hk, mk, ms, hs, g = mgr
     keep = (x.copy(), Pe.copy(), ee.copy(), cc.copy(), Fx.copy(), Gx.copy(), ms.copy(),
             hs.copy(), g.copy(), Q.copy())
@@ -122,9 +123,8 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
             fault[c] = U[L.U_FAIL0 + c] > 0.5
         x0 = S[L.S_X]
         if has_est:
-            x_hat, innov, nis, nd, code = ES.estimate(
-                ek, ee, x, Pe, F, G, ue, Q, tmp, H, R, y, Sy, H1, R1, y1, S1, g_leak, z2, z1, ws,
-                Fm, Gm, pos, meas[L.M_W0 + ch], pa, pb)
+            x_hat, innov, nis, nd, code = ES.estimate(ek, ee, ea, pos, meas[L.M_W0 + ch],
+                                                      pa, pb)
         else:
             x_hat, innov, nis, nd, code = pos, math.nan, math.nan, 0, 0
         CS.request(ck, cc, ref)
@@ -135,7 +135,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
                               reported, fault, innov, nd > 0 and code == 0, steady, age, cmd)
         un = math.nan
         if ok:
-            un = CS.control(ck, cc, Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt, x_hat)
+            un = CS.control(ck, cc, ca, x_hat)
         if not math.isfinite(un):
             _copy(keep[0], x); _copy(keep[1], Pe); _copy(keep[2], ee); _copy(keep[3], cc)  # noqa
             _copy(keep[4], Fx); _copy(keep[5], Gx); _copy(keep[6], ms); _copy(keep[7], hs)  # noqa
