@@ -36,7 +36,8 @@ class AdsHardware(Hardware):
         self.smap = load_symbol_map(resolve_path(p['bridge.symbol_map'], default_config_dir()))
         self.link = AdsLink(self.smap, p['ads.ams_net_id'], p['ads.ams_port'], p['ads.host'],
                             p['ads.tcp_port'], p['ads.timeout'], p['ads.sum_mode'])
-        self.staleness = Staleness(stale_limit, 2 ** (8 * self.smap['plc_cycle'].size))
+        # both counters wrap at their symbol's range (UDINT: 2**32)
+        self.staleness = Staleness(stale_limit, int_range(self.smap['plc_cycle'].fmt)[1] + 1)
         self.hb = 0
         self.hb_mod = int_range(self.smap['heartbeat'].fmt)[1] + 1
         self.select_block = None                 # channel_cmd ... bypass_cmd as last commanded
