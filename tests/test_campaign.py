@@ -130,6 +130,27 @@ def test_scenario_errors_are_one_line(tmp_path):
     p.write_text('kind: [unclosed\n')
     with pytest.raises(UsageError, match='malformed YAML'):
         SC.load(str(p))
+    p.write_text('kind: step\noverrides: {sweep:sweep.amplitude: 1.0}\n')
+    with pytest.raises(UsageError, match='overrides.*node:key: value'):
+        SC.load(str(p))
+
+
+def test_scenario_overrides_change_the_loop_for_every_run(tmp_path):
+    """saturation.yaml lifts the controller's reference limits (-p style, its own node only);
+    a key the node does not have is one line naming it."""
+    scn = SC.load('saturation')
+    assert scn.overrides == {'controller:control.rate_limit': 5.0,
+                             'controller:control.accel_limit': 0.0}
+    assert SC.from_saved(scn.as_dict()).overrides == scn.overrides      # campaign.json, tasks
+    nom = C.nominal_params(overrides=scn.overrides)
+    assert nom['controller']['control.rate_limit'] == 5.0
+    assert nom['controller']['control.accel_limit'] == 0.0
+    assert C.nominal_params()['controller']['control.rate_limit'] == 0.19
+    p = tmp_path / 's.yaml'
+    p.write_text('kind: step\noverrides: {controller:control.rate_limitt: 5.0}\n')
+    with pytest.raises(UsageError, match='overrides:.*rate_limitt'):
+        C.run_campaign(str(p), family={'C_eq': [1.0]}, out=str(tmp_path / 'c'))
+    assert not (tmp_path / 'c').exists()
 
 
 def test_nominal_runs_give_the_stack_figures():
@@ -152,6 +173,13 @@ def test_nominal_runs_give_the_stack_figures():
     assert figs['detection_time_s'] <= 0.05 and figs['false_alarm_ticks'] == 0
     figs, _ = SC.run(SC.load('motor_fail'), nom, one, 1)
     assert figs['final_channel'] == 1 and figs['drive_time_s'] <= 0.1
+    for name in ('saturation', 'jump'):    # reference limits lifted: the anti-windup's case
+        scn = SC.load(name)
+        figs, _ = SC.run(scn, C.nominal_params(overrides=scn.overrides), one, 1)
+        print(f"{name}: overshoot {figs['overshoot_pct']:.2f} %, settling "
+              f"{figs['settling_s']:.3f} s, max |command| {figs['max_abs_command']:.0f} rad/s")
+        assert figs['overshoot_pct'] <= 5.0 and figs['settling_s'] <= 0.3
+        assert figs['max_abs_command'] == pytest.approx(837.758041)     # it does saturate
 
 
 def test_false_alarm_scenario_counts_alarms_without_a_fault():

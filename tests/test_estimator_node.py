@@ -177,6 +177,12 @@ def test_one_estimate_per_state_same_seq_and_stamp(stack, ros_node):
     meas = np.array([states[s].position for s in common])
     assert np.all(np.abs(pos - meas) < 1e-3)                 # tracks the measured piston
     assert all(e.position_variance > 0 and e.nis >= 0 for e in fresh)
+    # the model's input goes on to the controller's anti-windup: the active motor's speed
+    used = [s for s in common if not by_seq[s][0].update_skipped]
+    assert used and all(by_seq[s][0].motor_speed ==
+                        states[s].motor_speed[states[s].active_channel] for s in used)
+    # not a constant: the encoder's noise (no controller here, the motor stands)
+    assert len({by_seq[s][0].motor_speed for s in used}) > 0.9 * len(used)
 
 
 def test_stale_marked_when_plant_stops(stack, ros_node):

@@ -167,7 +167,8 @@ def components(rec, refs, loads, repeats: int = 3) -> dict:
                                 plant._noise.block, plant._meas, aux, ring, table, rc[R_U],
                                 np.ascontiguousarray(loads)),
         'estimator': lambda: _estimator(ek, ee, ea, rc[R_XM], w_act, rc[R_PM], rc[R_PM + 1]),
-        'controller': lambda: _controller(ck, cc, ca, np.ascontiguousarray(refs), rc[R_XHAT]),
+        'controller': lambda: _controller(ck, cc, ca, np.ascontiguousarray(refs), rc[R_XHAT],
+                                          w_act),
         'switch_manager': lambda: _manager(*mgr, rc[R_U], rc[R_WM:R_WM + 2].copy(),
                                            rc[R_IM:R_IM + 2].copy(), rc[R_PM], rc[R_PM + 1]),
     }
@@ -189,11 +190,11 @@ def _estimator(ek, ee, ea, x, w, pa, pb):
 
 
 @njit(cache=True)
-def _controller(ck, cc, ca, refs, x_hat):
+def _controller(ck, cc, ca, refs, x_hat, w):
     s = 0.0
     for k in range(refs.shape[0]):
         CS.request(ck, cc, refs[k])
-        s += CS.control(ck, cc, ca, x_hat[k])
+        s += CS.control(ck, cc, ca, x_hat[k], w[k])
     return s
 
 

@@ -250,7 +250,7 @@ def make_node(params: dict):
                         f'resumed from the piston position')
                     self.tripped, self.safe = False, None
                     self.ctl.start(msg.position)       # bumpless: zero output, reference ramps
-                out = self.ctl.update(msg.position)
+                out = self.ctl.update(msg.position, msg.motor_speed)
                 speed, saturated = out.speed_ref, out.saturated
             elif self.tripped or self.last_good is None:
                 speed, saturated = 0.0, False

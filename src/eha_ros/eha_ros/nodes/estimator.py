@@ -141,6 +141,7 @@ def make_node(params: dict):
             m.position, m.velocity = r.position, r.velocity
             m.pressure_diff, m.position_variance = r.pressure_diff, r.position_variance
             m.innovation, m.nis = r.innovation, r.nis
+            m.motor_speed = r.motor_speed
             m.stale, m.update_skipped = stale, r.update_skipped
             m.sensor_fault = int(r.sensor_fault)
             m.consistency = int(r.consistency)

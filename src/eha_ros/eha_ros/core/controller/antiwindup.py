@@ -19,6 +19,13 @@ M(z) = C (zI - A)^-1 L, the loop seen by the dead zone is u = T q with
 
     T = (K P - M)/(1 + K P),      1 - T = (1 + M)/(1 + K P) =: H(z).
 
+The actuator the anti-windup sees is the drive, not only the clamp: its current limit makes
+the motor accelerate at most k_T I_max / J_eq, so a reference far ahead of the motor speed is
+not followed either (a piston held, a motor starting from rest: the clamp alone lets G's state
+run ahead of the motor, 8.6 % overshoot after a 2 mm jump). With the measured motor speed
+omega_m the effective actuator is u_a = clip(u_s, omega_m -+ r), r = :func:`drive_reach`, and
+L (u_a - u) replaces L (u_s - u); within the reach nothing changes.
+
 Discrete circle criterion (sector [0, k]): the loop is absolutely stable if it is stable
 unsaturated and Re[1 - k T] = (1 - k) + k Re H > 0 on the unit circle. Re H >= 0 everywhere
 gives this for every k < 1, i.e. for any bound on the unclamped output (|u| <= omega_max/(1 - k)).
@@ -58,6 +65,16 @@ def circle_h(Ad, Bd, Cd, Dd, L, P, z) -> np.ndarray:
     K = R @ np.asarray(Bd, float).ravel() + float(np.asarray(Dd).ravel()[0])
     M = R @ np.asarray(L, float)
     return (1.0 + M)[None, :] / (1.0 + K[None, :] * P)
+
+
+def drive_reach(k_T: float, I_max: float, J_eq: float, Kp_w: float, delay: float) -> float:
+    """How far (rad/s) a speed reference can lead the measured motor speed and still be
+    followed: the speed-loop error that puts the drive at its current limit,
+    k_T I_max / Kp_w (the P part of eq. 4.71), plus what the motor gains at the current-limited
+    acceleration k_T I_max / J_eq over ``delay`` (measurement to application: Ts and the
+    drive's delay)."""
+    torque = k_T * I_max
+    return torque / Kp_w + torque / J_eq * delay
 
 
 def poles_from_params(real, imag) -> np.ndarray:

@@ -26,6 +26,12 @@ NODE = Schema('controller', TF + [
           doc='acceleration of the move to a jumped reference (0: rate limit only)'),
     Param('control.antiwindup', 'bool', '', True,
           doc='observer-form anti-windup with antiwindup.poles_* (false: none, L = 0)'),
+    Param('control.drive_limit_antiwindup', 'bool', '', True,
+          doc='the anti-windup also bounds its actuator by the drive\'s reach beyond the '
+              'measured motor speed of /eha/estimate (k_T I_max/Kp_w + k_T I_max/J_eq (Ts + '
+              'drive delay), from plant.*; core.controller.antiwindup.drive_reach): a held '
+              'piston or a motor starting from rest does not wind G up; false: the speed clamp '
+              'only'),
     Param('control.prewarp_hz', 'float', 'Hz', 0.0, 0.0, 200.0,
           doc='Tustin prewarp frequency; 0 = plain Tustin'),
     Param('control.watchdog_ticks', 'int', '', 5, 1, 1000,

@@ -6,6 +6,8 @@ One call per estimate::
 
     r_req -> ReferenceShaper (NaN reject, clamp, 190 mm/s, acceleration) -> F -> r_f
     e = r_f - x_hat -> G (state x, observer-form anti-windup) -> u -> u_s = clip(u, +-omega_max)
+    motor speed omega_m -> the drive's reach (antiwindup.drive_reach) bounds the anti-windup's
+    actuator u_a = clip(u_s, omega_m -+ reach)
 
 G is realised as one state space (a cascade of real first- and second-order sections, qft.lti)
 of any proper G(s); nothing assumes its structure. The per-tick arithmetic is
@@ -23,7 +25,7 @@ from ..kernel_records import entry_point
 from ..qft.lti import from_num_den
 from ..loop.stats import Counters
 from . import stepper as S
-from .antiwindup import observer_gain, poles_from_params
+from .antiwindup import drive_reach, observer_gain, poles_from_params
 from .discrete import DiscreteSS, tustin
 from .reference import ReferenceShaper
 
@@ -42,6 +44,13 @@ def tf_to_ss(num, den):
     return A, B, C, D
 
 
+def drive_reach_of(p: dict) -> float:
+    """antiwindup.drive_reach from the plant.* parameters: measurement to application is one
+    tick plus the drive's delay."""
+    return drive_reach(p['plant.motor.k_T'], p['plant.drive.I_max'], p['plant.motor.J_eq'],
+                       p['plant.drive.Kp_w'], p['plant.sim.Ts'] + p['plant.drive.delay'])
+
+
 @dataclass
 class ControlOutput:
     speed_ref: float          # saturated motor-speed reference [rad/s]
@@ -55,12 +64,14 @@ class PositionController:
     """The controller core the node wraps; SI units (m in, rad/s out).
 
     aw_poles: continuous-time poles (rad/s, one per state of G, conjugate pairs) of the
-    controller while clamped (antiwindup.observer_gain); None or antiwindup False: L = 0."""
+    controller while clamped (antiwindup.observer_gain); None or antiwindup False: L = 0.
+    drive_reach: how far (rad/s) the reference may lead the motor speed given to
+    :meth:`update` (antiwindup.drive_reach); 0: the clamp is the only actuator limit."""
 
     def __init__(self, G, F, Ts: float, omega_max: float, stroke: float, margin: float,
                  rate_limit: float, antiwindup: bool = True, aw_poles=None,
                  prewarp_w: float | None = None, counters: Counters | None = None,
-                 accel_limit: float = 0.0):
+                 accel_limit: float = 0.0, drive_reach: float = 0.0):
         self.Ts = Ts
         self.omega_max = omega_max
         self.c = counters if counters is not None else Counters()
@@ -78,21 +89,25 @@ class PositionController:
             self.L = observer_gain(self.G.Ad, self.G.Cd, aw_poles, Ts)
         else:
             self.L = np.zeros(self.G.n)
+        if not (drive_reach >= 0.0 and math.isfinite(drive_reach)):
+            raise ValueError(f'drive reach {drive_reach}: expected a finite value >= 0 rad/s')
         self.k[S.K_WMAX], self.k[S.K_FDD], self.k[S.K_GDD] = omega_max, self.F._dd, self.G._dd
+        self.k[S.K_REACH] = drive_reach if self.antiwindup else 0.0
         self._arrays = S.pack(self)[2]     # F, G and L arrays: changed in place, never replaced
-        self._control = entry_point(S.control, self.k, self.s, self._arrays, 0.0)   # per tick
+        self._control = entry_point(S.control, self.k, self.s, self._arrays, 0.0, 0.0)  # per tick
 
     @classmethod
     def from_params(cls, p: dict, counters: Counters | None = None) -> 'PositionController':
         """From the controller node's parameters (core.controller.params.SCHEMA)."""
         prewarp = 2 * math.pi * p['control.prewarp_hz'] or None
         poles = poles_from_params(p['antiwindup.poles_real'], p['antiwindup.poles_imag'])
+        reach = drive_reach_of(p) if p['control.drive_limit_antiwindup'] else 0.0
         return cls((p['position_controller.num'], p['position_controller.den']),
                    (p['prefilter.num'], p['prefilter.den']), p['plant.sim.Ts'],
                    p['plant.drive.omega_max'], p['plant.cylinder.stroke'],
                    p['control.stroke_margin'], p['control.rate_limit'], p['control.antiwindup'],
                    aw_poles=poles, prewarp_w=prewarp, counters=counters,
-                   accel_limit=p['control.accel_limit'])
+                   accel_limit=p['control.accel_limit'], drive_reach=reach)
 
     def request(self, position: float) -> bool:
         return self.ref.request(position)
@@ -103,6 +118,11 @@ class PositionController:
         self.F.steady_state(position)
         self.G.reset()
         self.s[S.C_CLAMPED] = 0.0
+
+    @property
+    def drive_reach(self) -> float:
+        """How far (rad/s) the reference may lead the motor speed (0: not used)."""
+        return float(self.k[S.K_REACH])
 
     @property
     def started(self) -> bool:
@@ -123,10 +143,13 @@ class PositionController:
         over."""
         self.s[S.C_HOLD] = max(self.s[S.C_HOLD], ticks)
 
-    def update(self, position_estimate: float) -> ControlOutput:
+    def update(self, position_estimate: float, motor_speed: float = math.nan) -> ControlOutput:
+        """One tick: the position estimate (m) and the active motor's measured speed (rad/s;
+        NaN when unknown: the clamp is the only actuator limit)."""
         if not self.started:
             self.start(position_estimate)
-        u_sat = self._control(self.k, self.s, self._arrays, float(position_estimate))
+        u_sat = self._control(self.k, self.s, self._arrays, float(position_estimate),
+                              float(motor_speed))
         S.unpack(self, self.s)
         s = self.s
         return ControlOutput(float(u_sat), bool(s[S.C_CLAMPED]), float(s[S.C_R]),

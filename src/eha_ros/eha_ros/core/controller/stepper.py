@@ -22,13 +22,14 @@ from .discrete import ss_advance, ss_output, ss_step
 
 drop_stale(__file__)
 
-# constants
-K_LIMIT, K_STEP, K_WMAX, K_FDD, K_GDD, K_VMAX, K_ACCEL, K_TS = range(8)
-NK = 8
-# state; C_R, C_E, C_U: the last tick's prefiltered reference, error, unclamped output
+# constants; K_REACH: the drive's reach (rad/s) beyond the measured motor speed (0: not used)
+K_LIMIT, K_STEP, K_WMAX, K_FDD, K_GDD, K_VMAX, K_ACCEL, K_TS, K_REACH = range(9)
+NK = 9
+# state; C_R, C_E, C_U: the last tick's prefiltered reference, error, unclamped output;
+# C_N_REACH: ticks the drive's reach bounded the anti-windup's actuator
 (C_TARGET, C_VALUE, C_STARTED, C_CLAMPED, C_HOLD, C_N_SAT, C_N_CLAMPREF, C_RATE,
- C_R, C_E, C_U) = range(11)
-NC = 11
+ C_R, C_E, C_U, C_N_REACH) = range(12)
+NC = 12
 
 
 def new_arrays(limit: float, step: float, vmax: float, accel: float, Ts: float):
@@ -65,7 +66,8 @@ def pack(ctl):
 
 def unpack(ctl, c) -> None:
     """Counted events of the kernels added to the controller's counters (and cleared)."""
-    for name, i in (('saturated_ticks', C_N_SAT), ('clamped_references', C_N_CLAMPREF)):
+    for name, i in (('saturated_ticks', C_N_SAT), ('clamped_references', C_N_CLAMPREF),
+                    ('drive_limited_ticks', C_N_REACH)):
         if c[i]:
             ctl.c.bump(name, int(c[i]))
             c[i] = 0.0
@@ -113,12 +115,18 @@ def shape(k, c) -> float:
 
 
 @njit(cache=True)
-def control(k, c, a, x_hat):
-    """PositionController.update(x_hat) of a started controller; returns the clamped speed.
+def control(k, c, a, x_hat, motor_speed):
+    """PositionController.update(x_hat, motor_speed) of a started controller; returns the
+    clamped speed.
 
     u[k] = C x[k] + D e[k],  u_s[k] = clip(u[k], +-omega_max)
-    x[k+1] = A x[k] + B e[k] + L (u_s[k] - u[k])       (observer form, core.controller.antiwindup)
-    Unclamped, L (u_s - u) = 0: exactly Tustin(G). During an integrator hold (channel switch)
+    u_a[k] = clip(u_s[k], omega_m[k] -+ reach)          (what the drive can make of u_s)
+    x[k+1] = A x[k] + B e[k] + L (u_a[k] - u[k])       (observer form, core.controller.antiwindup)
+    Unclamped and within the drive's reach, L (u_a - u) = 0: exactly Tustin(G). The motor
+    speed omega_m (the estimate's model input) bounds the actuator the anti-windup sees: the
+    drive's current limit lets the motor follow a reference at most ``reach`` ahead of it
+    (antiwindup.drive_reach), so a piston held, or a motor starting from rest, does not wind
+    up G. A NaN speed or reach 0: the clamp only. During an integrator hold (channel switch)
     x is frozen and the output follows e through D only. ``a``: the :class:`Arrays`."""
     Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt = a
     r = ss_step(Fa, Fb, Fc, k[K_FDD], Fx, shape(k, c), Ft)
@@ -127,11 +135,20 @@ def control(k, c, a, x_hat):
     wmax = k[K_WMAX]
     m = u if u < wmax else wmax                          # min(omega_max, u)
     u_sat = m if m > -wmax else -wmax                    # max(-omega_max, .)
+    u_act = u_sat
+    reach = k[K_REACH]
+    if reach > 0.0 and math.isfinite(motor_speed):
+        if u_act > motor_speed + reach:
+            u_act = motor_speed + reach
+            c[C_N_REACH] += 1
+        elif u_act < motor_speed - reach:
+            u_act = motor_speed - reach
+            c[C_N_REACH] += 1
     if c[C_HOLD] > 0:
         c[C_HOLD] -= 1
     else:
         ss_advance(Ga, Gb, Gx, e, Gt)
-        d = u_sat - u
+        d = u_act - u
         for i in range(Gx.shape[0]):
             Gx[i] += Gl[i] * d
     clamped = (1 if u > u_sat else 0) - (1 if u < u_sat else 0)

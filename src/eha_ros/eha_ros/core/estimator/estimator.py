@@ -43,6 +43,7 @@ class EstimateResult:
     rejected: str = ''             # reasons, comma separated ('' when all was used)
     nis_dim: int = 0               # measurement dimension behind nis (0: no update)
     consistency: int = 0           # adapt.OK / MODEL / SENSOR / DISAGREE (adapt.VERDICTS)
+    motor_speed: float = math.nan  # the model's input: the active motor's speed (rad/s)
 
 
 def hydromech(pp: PlantParams, leakage: str) -> HydroMech:
@@ -384,7 +385,8 @@ class Estimator:
         kf = self.kf
         pd = kf.pressure_diff if self.is_model else self.pd_meas
         return EstimateResult(kf.position, kf.velocity, pd, kf.position_variance, innovation,
-                              nis, skipped, self.detector.code, rejected, m, self.consistency)
+                              nis, skipped, self.detector.code, rejected, m, self.consistency,
+                              self.omega_prev if self.started else math.nan)
 
     @property
     def friction_alphas(self):

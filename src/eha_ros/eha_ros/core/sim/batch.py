@@ -140,10 +140,10 @@ class BatchLoop:
             x_hat, nis, innov = r.position, r.nis, r.innovation
             code, nd = r.sensor_fault, r.nis_dim
             est_ok = r.nis_dim > 0 and not r.sensor_fault
-            verdict = r.consistency
+            verdict, w_act = r.consistency, r.motor_speed
         else:
             x_hat, nis, est_ok, innov, code, nd = m.position, math.nan, False, math.nan, 0, 0
-            verdict = 0
+            verdict, w_act = 0, float(m.motor_speed[m.active_channel])
         ctl.request(reference)
         if mgr is not None and SAFE.position_fault(verdict):
             mgr.safe_state(SAFE.manager_reason(verdict))
@@ -167,7 +167,7 @@ class BatchLoop:
             if self.holding:
                 self.holding = False
                 ctl.start(x_hat)                # bumpless, as the controller node
-            u = ctl.update(x_hat).speed_ref
+            u = ctl.update(x_hat, w_act).speed_ref
         plant.step(u, load)
         self.u = u
         tr = plant.truth()

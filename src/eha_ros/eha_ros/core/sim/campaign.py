@@ -31,11 +31,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config.cli import UsageError
+from ..config.params import ParamError
 from ..io.report import write_json
 from . import family as FAM
 from . import scenarios as SC
 
-NODES = ('plant_sim', 'estimator', 'controller', 'switch_manager')
+NODES = SC.NODES
 MULT = FAM.COLUMNS
 ID_COLUMNS = ('run_id',) + MULT + ('seed',)
 
@@ -55,16 +56,16 @@ class CampaignResult:
         return int(self.info['failed'])
 
 
-def nominal_params(config_dir: str | None = None) -> dict:
-    """{node: parameter dict} of the loop's nodes from config/ (core.config.registry.NODE_FILES)."""
+def nominal_params(config_dir: str | None = None, overrides=None) -> dict:
+    """{node: parameter dict} of the loop's nodes from config/ (core.config.registry.NODE_FILES);
+    ``overrides``: {'node:key': value} as -p assignments (a scenario's)."""
     from .batch import node_params
     from ..controller.params import SCHEMA as CTL
     from ..estimator.params import SCHEMA as EST
     from ..plant.node_params import SCHEMA as SIM
     from ..redundancy.params import SCHEMA as SW
     schemas = {'plant_sim': SIM, 'estimator': EST, 'controller': CTL, 'switch_manager': SW}
-    out = {n: node_params(n, schemas[n], config_dir) for n in NODES}
-    return out
+    return {n: node_params(n, schemas[n], config_dir, overrides) for n in NODES}
 
 
 def run_chunk(scn_doc: dict, nominal: dict, rows: list, trace: bool = True):
@@ -323,7 +324,10 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         if os.path.exists(os.path.join(out, 'campaign.json')):
             raise UsageError(f'{out} already holds a campaign: use --resume {out} to finish it, '
                              f'or another --out')
-    nominal = nominal_params(config_dir)
+    try:
+        nominal = nominal_params(config_dir, scn.overrides)
+    except ParamError as err:
+        raise UsageError(f'scenario {scn.path or scn.name}: overrides: {err}') from None
     n = len(fam['C_eq'])
     table = pd.DataFrame({'run_id': np.arange(n), **{c: fam[c] for c in MULT},
                           'seed': np.full(n, int(seed))})

@@ -122,9 +122,10 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
             reported[c] = U[L.U_EN0 + c] > 0.5
             fault[c] = U[L.U_FAIL0 + c] > 0.5
         x0 = S[L.S_X]
+        w_act = meas[L.M_W0 + ch]
         if has_est:
-            x_hat, innov, nis, nd, code = ES.estimate(ek, ee, ea, pos, meas[L.M_W0 + ch],
-                                                      pa, pb)
+            x_hat, innov, nis, nd, code = ES.estimate(ek, ee, ea, pos, w_act, pa, pb)
+            w_act = ee[ES.E_OMEGA]          # the estimate's motor speed, as in EstimateResult
         else:
             x_hat, innov, nis, nd, code = pos, math.nan, math.nan, 0, 0
         CS.request(ck, cc, ref)
@@ -135,7 +136,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
                               reported, fault, innov, nd > 0 and code == 0, steady, age, cmd)
         un = math.nan
         if ok:
-            un = CS.control(ck, cc, ca, x_hat)
+            un = CS.control(ck, cc, ca, x_hat, w_act)
         if not math.isfinite(un):
             _copy(keep[0], x); _copy(keep[1], Pe); _copy(keep[2], ee); _copy(keep[3], cc)  # noqa
             _copy(keep[4], Fx); _copy(keep[5], Gx); _copy(keep[6], ms); _copy(keep[7], hs)  # noqa

@@ -9,6 +9,8 @@ A scenario is a YAML file (config/campaigns/<name>.yaml; users add their own)::
     specs:                              # pass/fail per figure (SI units)
       overshoot_pct: {max: 5.0}
       peak_deviation_m: {max_rel: {to: lin_peak_deviation_m, factor: 1.25, offset: 5.0e-5}}
+    overrides:                          # optional: node parameters changed for every run, as
+      controller:control.rate_limit: 5.0  # -p node:key:=value (e.g. reference limits lifted)
 
 One run (:func:`run`) = the batch closed loop (core.sim.batch.BatchLoop, compiled path) of the
 stack -- nonlinear plant, Kalman estimator, QFT controller, switch manager, in the stack's tick
@@ -54,6 +56,7 @@ KINDS = {
                        duration=3.0),
 }
 SPEC_FORMS = ('max', 'min', 'max_rel')
+NODES = ('plant_sim', 'estimator', 'controller', 'switch_manager')    # what one run builds
 TRACE_POINTS = 1500          # decimated samples per trace kept for the report
 
 
@@ -65,6 +68,7 @@ class Scenario:
     params: dict = field(default_factory=dict)
     specs: dict = field(default_factory=dict)
     path: str = ''
+    overrides: dict = field(default_factory=dict)    # {'node:key': value} of the loop's nodes
 
     @property
     def duration(self) -> float:
@@ -75,7 +79,8 @@ class Scenario:
 
     def as_dict(self) -> dict:
         return dict(name=self.name, kind=self.kind, description=self.description,
-                    params=self.params, specs=self.specs, duration=self.duration)
+                    params=self.params, specs=self.specs, overrides=self.overrides,
+                    duration=self.duration)
 
 
 def scenario_dir() -> str:
@@ -113,10 +118,10 @@ def load(name_or_path: str) -> Scenario:
 def from_dict(doc, path: str = '<dict>') -> Scenario:
     if not isinstance(doc, dict):
         raise UsageError(f'scenario {path}: expected a mapping with name, kind, params, specs')
-    unknown = set(doc) - {'name', 'kind', 'description', 'params', 'specs'}
+    unknown = set(doc) - {'name', 'kind', 'description', 'params', 'specs', 'overrides'}
     if unknown:
         raise UsageError(f'scenario {path}: unknown key(s) {", ".join(sorted(unknown))} '
-                         f'(expected name, kind, description, params, specs)')
+                         f'(expected name, kind, description, params, specs, overrides)')
     kind = doc.get('kind')
     if kind not in KINDS:
         raise UsageError(f'scenario {path}: kind {kind!r}: expected one of {", ".join(KINDS)}')
@@ -151,8 +156,14 @@ def from_dict(doc, path: str = '<dict>') -> Scenario:
                                  f'{{to: column, factor: number, offset: number}}')
         elif not _num(v):
             raise UsageError(f'scenario {path}: specs.{metric}.{form} = {v!r}: expected a number')
+    overrides = doc.get('overrides') or {}
+    if not (isinstance(overrides, dict) and all(
+            isinstance(k, str) and k.partition(':')[0] in NODES and k.partition(':')[2]
+            for k in overrides)):
+        raise UsageError(f'scenario {path}: overrides = {overrides!r}: expected a mapping '
+                         f'node:key: value with node one of {", ".join(NODES)}')
     scn = Scenario(str(doc.get('name') or os.path.basename(path)[:-5]), kind,
-                   str(doc.get('description', '')), params, specs, path)
+                   str(doc.get('description', '')), params, specs, path, dict(overrides))
     _check_signals(scn, path)
     return scn
 
