@@ -169,7 +169,7 @@ def components(rec, refs, loads, repeats: int = 3) -> dict:
         'estimator': lambda: _estimator(ek, ee, ea, rc[R_XM], w_act, rc[R_PM], rc[R_PM + 1]),
         'controller': lambda: _controller(ck, cc, ca, np.ascontiguousarray(refs), rc[R_XHAT],
                                           w_act),
-        'switch_manager': lambda: _manager(*mgr, rc[R_U], rc[R_WM:R_WM + 2].copy(),
+        'switch_manager': lambda: _manager(mgr, rc[R_U], rc[R_WM:R_WM + 2].copy(),
                                            rc[R_IM:R_IM + 2].copy(), rc[R_PM], rc[R_PM + 1]),
     }
     out = {}
@@ -199,7 +199,7 @@ def _controller(ck, cc, ca, refs, x_hat, w):
 
 
 @njit(cache=True)
-def _manager(hk, mk, ms, hs, g, u, w, i, pa, pb):
+def _manager(a, u, w, i, pa, pb):
     wk, ik = np.zeros(2), np.zeros(2)
     reported, fault = np.zeros(2, np.bool_), np.zeros(2, np.bool_)
     steady, cmd, age = np.zeros(2, np.bool_), np.zeros(2, np.bool_), np.zeros(2)
@@ -207,8 +207,8 @@ def _manager(hk, mk, ms, hs, g, u, w, i, pa, pb):
     c = 0
     for k in range(u.shape[0]):
         wk[0], wk[1], ik[0], ik[1] = w[0, k], w[1, k], i[0, k], i[1, k]
-        c += RS.supervise(hk, mk, ms, hs, g, k * 1e-3, k, u[k], wk, ik, pa[k], pb[k], reported,
-                          fault, 1e-5, True, steady, age, cmd)
+        c += RS.supervise(a, k * 1e-3, k, u[k], wk, ik, pa[k], pb[k], reported, fault, 1e-5,
+                          True, steady, age, cmd)
     return c
 
 

@@ -11,13 +11,15 @@ import numpy as np
 
 Vector = NewType('Vector', np.ndarray)     # 1-d float64
 Matrix = NewType('Matrix', np.ndarray)     # 2-d float64
+Tensor3 = NewType('Tensor3', np.ndarray)   # 3-d float64
+NDIM = {Vector: 1, Matrix: 2, Tensor3: 3}
 
 
 def placeholder(record: type):
     """A ``record`` of small zero arrays of its fields' shapes: the argument types a kernel
     compiles for when its object is absent (a closed loop without an estimator)."""
     hints = typing.get_type_hints(record)
-    return record(*(np.zeros((2,) * (2 if hints[f] is Matrix else 1)) for f in record._fields))
+    return record(*(np.zeros((2,) * NDIM[hints[f]]) for f in record._fields))
 
 
 def entry_point(kernel, *example):

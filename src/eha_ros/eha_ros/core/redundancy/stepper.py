@@ -5,16 +5,19 @@ else -- a switch running, a transition due, a command -- is the Python state mac
 A running switch is followed here between its valve/drive steps (nothing changes then).
 
 The health arrays are the HealthMonitor's (k is a copy with the manager's blanking time);
-the manager's scalars are in the G_* vector; :func:`pack` / :func:`unpack` move them.
+the manager's scalars are in the G_* vector; :func:`pack` / :func:`unpack` move them. The
+kernel takes them as one named record (:class:`Arrays`).
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
+from ..kernel_records import Tensor3, Vector
 from .health import K_BLANK, available, health, healthy
 from .state_machine import ACTIVE, DEGRADED, FAILED_SAFE, SWITCHING
 
@@ -29,9 +32,18 @@ G_TARGET, G_NEXT_STEP = 11, 12      # switch target, time of its next valve/driv
 NG = 13
 
 
-def pack(mgr):
-    """(constants, monitor constants, monitor state, health state, manager state): the
-    HealthMonitor's own arrays (k: a copy with the blanking time) and a new manager vector."""
+class Arrays(NamedTuple):
+    """The switch manager's arrays the kernel works on (:func:`pack`)."""
+    k: Vector           # the HealthMonitor's constants, a copy with the blanking time
+    mk: Tensor3         # per channel and monitor: the monitors' constants
+    ms: Tensor3         # per channel and monitor: their state
+    hs: Vector          # the HealthMonitor's state
+    g: Vector           # the manager's scalars (G_*)
+
+
+def pack(mgr) -> Arrays:
+    """The manager's :class:`Arrays`: the HealthMonitor's own (k: a copy with the blanking
+    time) and a new manager vector."""
     h = mgr.health
     k = h.k.copy()
     k[K_BLANK] = mgr.blank
@@ -44,20 +56,22 @@ def pack(mgr):
         g[G_ENABLE + c] = mgr.select.drive_enable[c]
         g[G_ENABLE_SINCE + c] = mgr.enable_since[c]
         g[G_LATCHED + c] = mgr.latched[c]
-    return k, h.mk, h.ms, h.hs, g
+    return Arrays(k, h.mk, h.ms, h.hs, g)
 
 
-def unpack(mgr, ms, hs, g) -> None:
+def unpack(mgr, a: Arrays) -> None:
     """Time and seq back into the manager (the health state is its own arrays already;
     nothing else changes in a segment)."""
-    mgr.t, mgr.seq = float(g[G_T]), int(g[G_SEQ])
+    mgr.t, mgr.seq = float(a.g[G_T]), int(a.g[G_SEQ])
 
 
 @njit(cache=True)
-def supervise(k, mk, ms, hs, g, t, seq, speed_ref, w_meas, i_meas, pa, pb, reported, fault,
-              innovation, estimate_ok, steady, age, cmd) -> bool:
+def supervise(a, t, seq, speed_ref, w_meas, i_meas, pa, pb, reported, fault, innovation,
+              estimate_ok, steady, age, cmd) -> bool:
     """SwitchManager.update; False when the state machine would act (a transition, a valve or
-    drive step of a running switch): state to be rolled back, the tick done in Python."""
+    drive step of a running switch): state to be rolled back, the tick done in Python.
+    ``a``: the :class:`Arrays`."""
+    k, mk, ms, hs, g = a.k, a.mk, a.ms, a.hs, a.g
     g[G_T] = t
     g[G_SEQ] = seq
     state = int(g[G_STATE])

@@ -231,11 +231,12 @@ class BatchLoop:
         from ..controller import stepper as CS
         from ..plant import stepper as PS
         from ..redundancy import stepper as RS
+        from ..kernel_records import placeholder
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
         aux, ring, table = PS.pack(plant)
         est_kernel = est.kernel if est is not None else _dummy_estimator()
         ctl_kernel = CS.pack(ctl)
-        hk, mk, ms, hs, g = RS.pack(mgr) if mgr is not None else _dummy_manager()
+        mgr_arrays = RS.pack(mgr) if mgr is not None else placeholder(RS.Arrays)
         u = self.u
         noise = plant._noise
         while True:
@@ -244,7 +245,7 @@ class BatchLoop:
             k0 = k
             k, why, u = CL.segment(k, stop, off, self.Ts, refs, loads, pl, plant._nsub,
                                    est_kernel, est is not None,
-                                   ctl_kernel, (hk, mk, ms, hs, g), mgr is not None,
+                                   ctl_kernel, mgr_arrays, mgr is not None,
                                    u, rec)
             self.segments += 1
             self.fast_ticks += k - k0
@@ -254,7 +255,7 @@ class BatchLoop:
         self.u = float(u)
         CS.unpack(ctl, ctl.s)
         if mgr is not None:
-            RS.unpack(mgr, ms, hs, g)
+            RS.unpack(mgr, mgr_arrays)
         return k
 
 
@@ -263,11 +264,3 @@ def _dummy_estimator():
     from ..estimator import stepper as ES
     from ..kernel_records import placeholder
     return np.zeros(ES.NK), np.zeros(ES.NE), placeholder(ES.Arrays)
-
-
-def _dummy_manager():
-    """Arrays of the switch manager's types when the loop has no manager."""
-    from ..redundancy import health as H
-    from ..redundancy import stepper as RS
-    return (np.zeros(H.NK), np.zeros((2, H.NMON, 5)), np.zeros((2, H.NMON, 3)),
-            np.zeros(H.NH), np.zeros(RS.NG))

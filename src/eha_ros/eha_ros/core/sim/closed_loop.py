@@ -91,7 +91,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
     ek, ee, ea = est                    # estimator stepper: constants, state, Arrays
     ck, cc, ca = ctl                    # controller stepper: constants, state, Arrays
     x, Pe, Q, Fx, Gx = ea.x, ea.P, ea.Q, ca.Fx, ca.Gx
-    hk, mk, ms, hs, g = mgr
+    ms, hs, g = mgr.ms, mgr.hs, mgr.g   # switch manager stepper: Arrays
     keep = (x.copy(), Pe.copy(), ee.copy(), cc.copy(), Fx.copy(), Gx.copy(), ms.copy(),
             hs.copy(), g.copy(), Q.copy())
     w_meas = np.zeros(2)
@@ -132,8 +132,8 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         # a position fault (core.loop.safe_state) is Python's: rolled back, then done by BatchLoop
         ok = math.isfinite(x_hat) and not (has_est and ES.position_fault(ee))
         if ok and has_mgr:
-            ok = RS.supervise(hk, mk, ms, hs, g, k * Ts, k, u, w_meas, i_meas, pa, pb,
-                              reported, fault, innov, nd > 0 and code == 0, steady, age, cmd)
+            ok = RS.supervise(mgr, k * Ts, k, u, w_meas, i_meas, pa, pb, reported, fault,
+                              innov, nd > 0 and code == 0, steady, age, cmd)
         un = math.nan
         if ok:
             un = CS.control(ck, cc, ca, x_hat, w_act)
