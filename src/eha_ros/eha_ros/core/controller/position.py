@@ -120,11 +120,6 @@ class PositionController:
         self.s[S.C_CLAMPED] = 0.0
 
     @property
-    def drive_reach(self) -> float:
-        """How far (rad/s) the reference may lead the motor speed (0: not used)."""
-        return float(self.k[S.K_REACH])
-
-    @property
     def started(self) -> bool:
         return self.ref.value is not None
 

@@ -60,12 +60,8 @@ def nominal_params(config_dir: str | None = None, overrides=None) -> dict:
     """{node: parameter dict} of the loop's nodes from config/ (core.config.registry.NODE_FILES);
     ``overrides``: {'node:key': value} as -p assignments (a scenario's)."""
     from .batch import node_params
-    from ..controller.params import SCHEMA as CTL
-    from ..estimator.params import SCHEMA as EST
-    from ..plant.node_params import SCHEMA as SIM
-    from ..redundancy.params import SCHEMA as SW
-    schemas = {'plant_sim': SIM, 'estimator': EST, 'controller': CTL, 'switch_manager': SW}
-    return {n: node_params(n, schemas[n], config_dir, overrides) for n in NODES}
+    from ..config.registry import schema_for
+    return {n: node_params(n, schema_for(n), config_dir, overrides) for n in NODES}
 
 
 def run_chunk(scn_doc: dict, nominal: dict, rows: list, trace: bool = True):

@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from ..config.cli import UsageError
+from ..config.registry import LOOP_NODES
 from ..config.params import default_config_dir
 
 # kind -> default params (SI units). Times in s from the start of the run.
@@ -56,7 +57,7 @@ KINDS = {
                        duration=3.0),
 }
 SPEC_FORMS = ('max', 'min', 'max_rel')
-NODES = ('plant_sim', 'estimator', 'controller', 'switch_manager')    # what one run builds
+NODES = ('plant_sim',) + LOOP_NODES    # what one run builds (core.config.registry)
 TRACE_POINTS = 1500          # decimated samples per trace kept for the report
 
 
