@@ -7,13 +7,15 @@ import numpy as np
 import pytest
 
 from eha_ros.core.config.params import ParamError, load
-from eha_ros.core.estimator import batch, kernels
+from eha_ros.core.estimator import kernels
+from eha_ros.core.sim import pid_loop as batch
 from eha_ros.core.estimator.chinniah import (ALPHA_TABLE_4_1, Chinniah3, ChinniahEstimator,
                                              ChinniahJoint, simulate_rig)
 from eha_ros.core.estimator.chamber_kf import ChamberKF
 from eha_ros.core.estimator.chamber_kf import continuous as chamber_continuous
 from eha_ros.core.estimator.estimator import Estimator, build_filter, circuit
-from eha_ros.core.estimator.model_kf import HydroMech, continuous, friction_estimate, zoh
+from eha_ros.core.estimator.friction import friction_estimate
+from eha_ros.core.estimator.model_kf import HydroMech, continuous, zoh
 from eha_ros.core.estimator.params import SCHEMA
 from eha_ros.core.estimator.pva import PvaKF, pva_matrices
 from eha_ros.core.plant.linear import hydromech_abcd
@@ -186,7 +188,7 @@ def test_pva_tracks_constant_acceleration_and_reduces_white_noise():
 def test_pva_option_runs_in_the_estimator(params):
     p = dict(params)
     p['estimator.filter'] = 'pva'
-    run = batch.closed_loop(p, batch.sine(1e-3, 2.0), 2.0, seed=2)
+    run = batch.estimator_loop(p, batch.sine(1e-3, 2.0), 2.0, seed=2)
     s = run.t > 0.5
     err = np.sqrt(np.mean((run.estimate[s] - run.truth[s]) ** 2))
     raw = np.sqrt(np.mean((run.measured[s] - run.truth[s]) ** 2))
@@ -205,7 +207,7 @@ def test_mean_nis_matches_measurement_dimension_under_nominal_noise(params, stru
     p = dict(params)
     p['estimator.measurements'] = measurements
     p['estimator.model.structure'] = structure
-    run = batch.closed_loop(p, lambda t: 0.0 * t, 6.0, seed=4)
+    run = batch.estimator_loop(p, lambda t: 0.0 * t, 6.0, seed=4)
     s = (run.t > 1.0) & (run.nis_dim > 0)
     assert np.all(run.nis_dim[s] == dim)
     mean = run.nis[s].mean()
@@ -220,7 +222,7 @@ def test_mean_nis_matches_measurement_dimension_under_nominal_noise(params, stru
 def test_mean_nis_in_motion_position_only(params):
     p = dict(params)
     p['estimator.measurements'] = 'position'
-    run = batch.closed_loop(p, batch.sine(5e-3, 1.0), 6.0, seed=5)
+    run = batch.estimator_loop(p, batch.sine(5e-3, 1.0), 6.0, seed=5)
     s = (run.t > 1.0) & (run.nis_dim > 0)
     mean = run.nis[s].mean()
     print(f'position-only, 1 Hz 5 mm sine: mean NIS {mean:.3f}')

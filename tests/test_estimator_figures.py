@@ -1,4 +1,4 @@
-"""The issue's measured figures on the simulated bench, in batch (core.estimator.batch):
+"""The issue's measured figures on the simulated bench, in batch (core.sim.pid_loop):
 nonlinear plant with its default sensor noise + estimator + the Table 3.8 position PID closing
 the loop on the ESTIMATE (as the controller does on the bench; the estimate's errors then show
 up in the piston motion, which is what the truth comparison is about)."""
@@ -6,7 +6,7 @@ up in the piston motion, which is what the truth comparison is about)."""
 import numpy as np
 import pytest
 
-from eha_ros.core.estimator import batch
+from eha_ros.core.sim import pid_loop as batch
 from eha_ros.core.estimator import adapt
 from eha_ros.core.estimator import fault_detector as fd
 
@@ -27,7 +27,7 @@ def sine_1hz(params):
     filter)."""
     out = []
     for seed in SEEDS:
-        run = batch.closed_loop(params, batch.sine(5e-3, 1.0), 30.0, seed=seed)
+        run = batch.estimator_loop(params, batch.sine(5e-3, 1.0), 30.0, seed=seed)
         s = run.t >= 6.0
         est, raw = rms(run.estimate[s] - run.truth[s]), rms(run.measured[s] - run.truth[s])
         print(f'\n1 Hz 5 mm sine, seed {seed}: estimate RMSE {est * 1e6:.2f} um, raw sensor RMSE '
@@ -49,7 +49,7 @@ def test_eq4_35_filter_rmse_during_1hz_5mm_sine(params):
     of what it achieves (about 0.35), and the reason the chamber filter is the default."""
     p = dict(params)
     p['estimator.model.structure'] = 'eq4_35'
-    run = batch.closed_loop(p, batch.sine(5e-3, 1.0), 12.0, seed=1)
+    run = batch.estimator_loop(p, batch.sine(5e-3, 1.0), 12.0, seed=1)
     s = run.t >= 4.0
     est, raw = rms(run.estimate[s] - run.truth[s]), rms(run.measured[s] - run.truth[s])
     print(f'\neq. 4.35 filter: ratio {est / raw:.3f}')
@@ -57,7 +57,7 @@ def test_eq4_35_filter_rmse_during_1hz_5mm_sine(params):
 
 
 def test_phase_of_estimate_at_7hz_within_10_degrees(params):
-    run = batch.closed_loop(params, batch.sine(1e-3, 7.0), 3.0, seed=2)
+    run = batch.estimator_loop(params, batch.sine(1e-3, 7.0), 3.0, seed=2)
     s = run.t >= 1.0 - 1e-9                     # 14 whole periods
     ph = batch.phase_deg(run.estimate[s], run.truth[s], 7.0, run.t[s])
     e = np.exp(-2j * np.pi * 7.0 * run.t[s])
@@ -78,7 +78,7 @@ def test_10um_steps_resolved_without_steady_state_error(params):
     in the first 1-2 s after start (first plateau 2.2 um with a start at 1 s)."""
     hold, n, t0 = 0.5, 11, 2.0
     ref = lambda t: 10e-6 * np.floor(np.maximum(t - t0, 0.0) / hold + (t >= t0))  # noqa: E731
-    run = batch.closed_loop(params, ref, t0 + n * hold + hold, seed=1)
+    run = batch.estimator_loop(params, ref, t0 + n * hold + hold, seed=1)
     est_err, truth_lvl = [], []
     for i in range(n + 1):
         t_end = t0 + i * hold
@@ -98,7 +98,7 @@ def test_10um_steps_resolved_without_steady_state_error(params):
 
 @pytest.mark.parametrize('magnitude', [1e-3, -1e-3])
 def test_1mm_sensor_jump_detected_within_50ms(params, magnitude):
-    run = batch.closed_loop(params, batch.sine(5e-3, 1.0), 3.0, seed=3,
+    run = batch.estimator_loop(params, batch.sine(5e-3, 1.0), 3.0, seed=3,
                             faults=[(2.0, 'msp_bias', magnitude)])
     before = run.fault[run.t < 2.0]
     hit = np.nonzero((run.t >= 2.0) & (run.fault == fd.JUMP))[0]
@@ -111,7 +111,7 @@ def test_1mm_sensor_jump_detected_within_50ms(params, magnitude):
 
 def test_no_false_alarm_in_60s_of_nominal_noise(params):
     """60 s of closed-loop operation (1 Hz, 5 mm sine) with the default sensor noise."""
-    run = batch.closed_loop(params, batch.sine(5e-3, 1.0), 60.0, seed=7)
+    run = batch.estimator_loop(params, batch.sine(5e-3, 1.0), 60.0, seed=7)
     codes, counts = np.unique(run.fault, return_counts=True)
     print(f'\n60 s nominal: fault codes {dict(zip(codes.tolist(), counts.tolist()))}, '
           f'max NIS {run.nis.max():.1f}')
@@ -119,13 +119,13 @@ def test_no_false_alarm_in_60s_of_nominal_noise(params):
 
 
 def test_stuck_and_drift_classified(params):
-    run = batch.closed_loop(params, batch.sine(5e-3, 1.0), 2.5, seed=3,
+    run = batch.estimator_loop(params, batch.sine(5e-3, 1.0), 2.5, seed=3,
                             faults=[(2.0, 'msp_stuck', 0.0)])
     after = run.fault[run.t >= 2.0]
     first = np.nonzero(after)[0]
     assert first.size and after[first[0]] == fd.STUCK, after[first[0]:first[0] + 5]
     assert run.t[run.t >= 2.0][first[0]] - 2.0 <= 0.050
-    run = batch.closed_loop(params, lambda t: 0.0 * t, 3.5, seed=3,
+    run = batch.estimator_loop(params, lambda t: 0.0 * t, 3.5, seed=3,
                             faults=[(2.0, 'msp_drift', 1e-3)])   # 1 mm/s
     # a slow sensor drift while holding (no flow the adapted model could explain) is reported
     # as a drift by the CUSUM or, once the estimate follows the sensor beyond its error band

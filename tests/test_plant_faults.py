@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from eha_ros.core.plant.scenarios import closed_loop, make_plant
+from eha_ros.core.sim.pid_loop import make_plant, plant_loop as closed_loop
 
 
 def _quiet():

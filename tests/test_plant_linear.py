@@ -6,7 +6,7 @@ import pytest
 
 from eha_ros.core.plant import linear as lin
 from eha_ros.core.plant.parameters import nominal_plant
-from eha_ros.core.plant.scenarios import make_plant
+from eha_ros.core.sim.pid_loop import make_plant
 
 P = nominal_plant()
 

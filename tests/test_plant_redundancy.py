@@ -1,7 +1,7 @@
 """Dual redundancy (Fig. 3.12, Table 3.4): channel switch during a 3 Hz sine under 10 kN."""
 import numpy as np
 
-from eha_ros.core.plant import scenarios as sc
+from eha_ros.core.sim import pid_loop as sc
 
 
 def test_table_3_4_switch_keeps_tracking():

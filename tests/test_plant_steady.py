@@ -1,7 +1,7 @@
 """Steady-state physics: speed ratio D_p/A_p (eq. 4.44 gain) and the 23 kN hold (Fig. 4.47)."""
 import numpy as np
 
-from eha_ros.core.plant.scenarios import closed_loop, make_plant
+from eha_ros.core.sim.pid_loop import make_plant, plant_loop as closed_loop
 
 
 def test_piston_over_motor_speed_is_Dp_over_Ap():

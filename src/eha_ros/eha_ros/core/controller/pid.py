@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 RPM = 2.0 * math.pi / 60.0
 
@@ -57,3 +58,32 @@ class PID:
         if not ((u > self.u_max and error > 0) or (u < self.u_min and error < 0)):
             self.integral += self.Ts * error
         return clamped
+
+
+class PIDLoop:
+    """A :class:`PID` on the position error behind the position controller's interface
+    (request / update / start / hold_integrator), so the one closed-loop harness
+    (core.sim.batch.BatchLoop) runs the thesis' Table 3.8 loop as it runs the stack's."""
+
+    class Output(NamedTuple):
+        speed_ref: float     # rad/s
+
+    started = True           # no start-up: the PID acts from the first tick
+
+    def __init__(self, pid: PID):
+        self.pid = pid
+        self.reference = 0.0
+
+    def request(self, reference: float) -> None:
+        self.reference = reference
+
+    def update(self, position: float, motor_speed: float = 0.0) -> 'PIDLoop.Output':
+        """One sample on the error reference - position (the motor speed is not used)."""
+        return self.Output(self.pid.update(self.reference - position))
+
+    def start(self, position: float) -> None:
+        """Back from a hold (the stack's safe state): integral and derivative from zero."""
+        self.pid.reset()
+
+    def hold_integrator(self, ticks: int) -> None:
+        """A channel switch: the Table 3.8 loop has no hold; nothing to do."""

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from . import adapt, kernels
-from .model_kf import MeasuredKF, friction_estimate, zoh
+from .model_kf import MeasuredKF, zoh
 
 
 @dataclass(frozen=True)
@@ -222,7 +222,6 @@ class ChamberKF(MeasuredKF):
                 De.append(leak_sensitivity(c, A, Ts, n, 'r') if split else np.zeros((n, n)))
         self.Lm = np.vstack(L)                      # (4 n, 2), rows of mode m at m n
         self.Dm = np.hstack((np.vstack(D), np.vstack(De)))   # (4 n, 2 n): lambda | epsilon
-        self._Fj = np.zeros((n, n))
         self.F, self.G = (a.copy() for a in self.modes[0])   # this tick's pair, copied in
         self.mode = 0
         self.Q = np.diag(np.asarray(q, float))
@@ -270,33 +269,10 @@ class ChamberKF(MeasuredKF):
         Stribeck curve at the pump-flow velocity (adapt.friction_input), or, without
         ``friction``, eq. 4.36 (from the measured p_D, or the filter's own, when
         friction_uses_pressure; its sign from w_friction, default omega); the check-valve
-        states come from the prior chamber pressures."""
-        self.u[0] = omega
-        if self.fk is not None:
-            self.u[1] = adapt.friction_input(self.fk, self.fs, self.x, omega)
-        else:
-            pd = (self.x[2] - self.x[3]) if p_D is None else p_D
-            w = omega if w_friction is None else w_friction
-            self.u[1] = friction_estimate(float(w), float(pd), bool(self.friction_uses_pressure),
-                                          self.c.A_p, self.c.D_p, self.F_s, self.v_eps)
-        self.mode = self.valve_mode()
-        self.F[:], self.G[:] = self.modes[self.mode]
-        if self.i_phi >= 0:
-            adapt.friction_column(self.F, self.G, self._n_lin, self.i_phi, self.fs)
-        if self.adaptive:
-            c, x, pl = self.c, self.x, self.p_last
-            adapt.pressure_increments(pl, x[2], x[3], self.alpha_dp)
-            adapt.parameter_columns(self.F, self.Lm, self.mode * self.n, 0, self._n_lin,
-                                    self.i_lam, self.i_del, self.i_kap, self.i_eps, x[2], x[3],
-                                    pl[2], pl[3], omega, c.C_x, c.C_r, c.p_acc, c.D_p,
-                                    self.c_Ts)
-        if self.i_lam >= 0:
-            eps = self.x[self.i_eps] if self.i_eps >= 0 else 0.0
-            adapt.predict_jacobian(self.x, self.P, self.F, self._Fj, self.Dm, self.mode * self.n,
-                                   0, self.n, self._n_lin, self.x[self.i_lam], eps, self.G,
-                                   self.u, self.Q, self._tmp)
-        else:
-            kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
+        states come from the prior chamber pressures. The compiled tick's prediction
+        (stepper.predict_filter)."""
+        from .stepper import predict_filter
+        predict_filter(self, True, omega, p_D, w_friction)
 
     def update(self, z_pos: float, p_a: float | None = None, p_b: float | None = None):
         """MeasuredKF.update, then the estimate projection of :func:`.adapt.project`."""

@@ -13,7 +13,7 @@ Corrections to the printed eq. 4.35 (stated here because they change the filter)
   as in eq. 3.23/3.24: the load pressure pushes the piston towards +x.
 - F_L enters as +F_L/m_p: a force along +x. Eq. 4.36 gives it as the friction estimate
   F_L = -sign(xdot) min(|p_D A_p|, F_s) (F_s = 800 N), i.e. a force opposing the motion.
-  How it is evaluated (choices, see :func:`friction_estimate`): sign(xdot) is taken from the
+  How it is evaluated (choices, see :func:`.friction.friction_estimate`): sign(xdot) is taken from the
   measured motor speed (the estimator passes its 50 Hz low-pass, model.friction_lowpass, so
   speed-command chatter does not flip it), saturated over a small pump-flow band v_eps (the
   pump drives the piston, xdot ~ D_p omega / A_p, eq. 3.22 at steady state), and p_D, if
@@ -42,7 +42,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from scipy.linalg import expm
 
 from . import kernels
@@ -88,26 +87,6 @@ def zoh(A: np.ndarray, B: np.ndarray, Ts: float):
     M[:n, n:] = B
     E = expm(M * Ts)
     return E[:n, :n].copy(), E[:n, n:].copy()
-
-
-@njit(cache=True)
-def friction_estimate(omega, p_D, has_pd, A_p, D_p, F_s, v_eps):
-    """Eq. 4.36, F_L = -sign(xdot) min(|p_D A_p|, F_s), made continuous for a sampled filter.
-
-    sign(xdot) is taken from the pump flow, s = sat(D_p omega / (A_p v_eps)) (a hard sign
-    switches F_L by 2 F_s within one Ts at every reversal and kicks the stiff p_D state);
-    p_D is the measured load pressure (has_pd False without pressure sensors: |F_L| = F_s).
-    Where |s| < 1 the friction blends into sticking, holding the pressure force:
-    F_L = -s min(|A_p p_D|, F_s) - (1 - |s|) clip(A_p p_D, -F_s, F_s).
-    """
-    s = D_p * omega / (A_p * v_eps)
-    s = 1.0 if s > 1.0 else (-1.0 if s < -1.0 else s)
-    if not has_pd:
-        return -s * F_s
-    force = A_p * p_D
-    held = F_s if force > F_s else (-F_s if force < -F_s else force)
-    a = abs(force)
-    return -s * (F_s if F_s < a else a) - (1.0 - abs(s)) * held
 
 
 LEAK_UNIT = 1e-12      # m^3/(s Pa): unit of the leakage-coefficient correction state
@@ -269,16 +248,10 @@ class ModelKF(MeasuredKF):
         """One Ts with the motor speed and the measured p_D (friction estimate of eq. 4.36,
         leakage correction) held over the period (ZOH); p_D None: no pressure sensors, the
         filter's own p_D is used for the leakage term. w_friction: the speed whose sign the
-        friction takes (default omega; the estimator passes a low-pass of it)."""
-        self.u[0] = omega
-        w = omega if w_friction is None else w_friction
-        has_pd = self.friction_uses_pressure and p_D is not None
-        self.u[1] = friction_estimate(float(w), float(p_D) if has_pd else 0.0, has_pd,
-                                      self.h.A_p, self.h.D_p, self.F_s, self.v_eps)
-        if self.i_leak is not None:
-            pd = self.x[2] if p_D is None else p_D
-            self.F[:self._n_lin, self.i_leak] = self._g_leak * pd
-        kernels.predict(self.x, self.P, self.F, self.G, self.u, self.Q, self._tmp)
+        friction takes (default omega; the estimator passes a low-pass of it). The compiled
+        tick's prediction (stepper.predict_filter)."""
+        from .stepper import predict_filter
+        predict_filter(self, False, omega, p_D, w_friction)
 
     def pressure_z(self, p_a: float, p_b: float) -> tuple:
         return (p_a - p_b,)                 # p_D

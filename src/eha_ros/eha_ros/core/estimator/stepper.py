@@ -24,7 +24,7 @@ from . import adapt
 from . import fault_detector as fd
 from . import noise_level
 from .kernels import predict, update_gated, workspace_size
-from .model_kf import friction_estimate
+from .friction import friction_estimate
 
 drop_stale(__file__)
 
@@ -99,21 +99,48 @@ def pack(est):
     kf, d = est.kf, est.detector
     k = np.zeros(NK)
     e = np.zeros(NE)
+    arrays = pack_filter(kf, k, e, est.is_model, est.chambers)
     k[K_XMAX], k[K_PMIN], k[K_PMAX], k[K_WMAX] = est.x_max, est.p_min, est.p_max, est.w_max
     k[K_ALPHA_PD], k[K_ALPHA_WF] = est.alpha_pd, est.alpha_wf
-    k[K_MODEL] = est.is_model
     k[K_USE_P] = est.use_pressure
     k[K_ISOLATE] = est.isolate
+    k[K_ILOAD], k[K_QLOAD], k[K_QLOADJ], k[K_LOADZ] = (est.i_load, est.q_load,
+                                                      est.q_load_jump, est.load_jump_z)
+    k[K_QX], k[K_QXD], k[K_BDIS] = est.q_x, est.q_x_disagree, est.b_dis
+    k[K_MON:K_MON + adapt.NMK] = est.monitor_k
+    e[E_MON:E_MON + adapt.NMS] = est.monitor_s
+    if est.noise_k is not None:
+        k[K_NADAPT] = 1.0
+        k[K_NL:K_NL + noise_level.NNK] = est.noise_k
+    e[E_NL:E_NL + noise_level.NNS] = est.noise_s
+    k[K_QFLOW], k[K_FLOWK], k[K_FLOWN] = est.q_flow, est.flow_k, est.flow_n
+    k[K_FLOWSH], k[K_FLOWREP] = est.flow_share, est.flow_report
+    e[E_FLOWN:E_FLOWN + adapt.NFLOW] = est.flow_s
+    k[K_OFFG], k[K_QXO] = est.offset_gate, est.q_x_offset
+    k[K_OFFA:K_OFFA + 3] = est.offset_alpha
+    e[E_OFFS:E_OFFS + adapt.NOFS] = est.offset_s
+    k[K_FD:K_FD + fd.NFK] = d.k
+    e[E_FD:E_FD + fd.NFS] = d.s
+    return k, e, arrays
+
+
+def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
+    """The filter's part of (k, e) -- what :func:`predict_tick` reads: its model, friction,
+    check-valve and adaptive constants and state -- and its arrays: a ``model`` filter (eq.
+    4.35, ModelKF; with ``chambers`` ChamberKF) or the PVA filter (neither)."""
+    k[K_MODEL], k[K_CHAMBERS] = model, chambers
     k[K_ILEAK] = -1.0
-    if est.is_model:
+    if model:
         k[K_FRIC_P] = kf.friction_uses_pressure
         k[K_ILEAK] = -1.0 if kf.i_leak is None else kf.i_leak
         k[K_NLIN] = kf._n_lin
-        c = kf.c if est.chambers else kf.h
+        c = kf.c if chambers else kf.h
         k[K_AP], k[K_DP], k[K_FS], k[K_VEPS] = c.A_p, c.D_p, kf.F_s, kf.v_eps
-    k[K_CHAMBERS] = est.chambers
     k[K_ILAM] = k[K_IDEL] = k[K_IKAP] = k[K_IGM] = k[K_IPHI] = k[K_IEPS] = -1.0
-    if est.chambers:
+    k[K_IFLOW], k[K_FLOWDP] = -1.0, 0.0
+    F, G = kf.F, kf.G
+    Fm, Gm = np.zeros((1, 1)), np.zeros((1, 1))
+    if chambers:
         k[K_PC] = kf.c.p_c
         k[K_CX], k[K_CR], k[K_PACC] = kf.c.C_x, kf.c.C_r, kf.c.p_acc
         k[K_ILAM], k[K_IDEL], k[K_IGM], k[K_BMAX] = kf.i_lam, kf.i_del, kf.i_gm, kf.offset_bound
@@ -131,28 +158,7 @@ def pack(est):
             k[K_STRIBECK] = 1.0
             k[K_FK:K_FK + adapt.NFK] = kf.fk
             e[E_FS:E_FS + adapt.NFS] = kf.fs
-    k[K_ILOAD], k[K_QLOAD], k[K_QLOADJ], k[K_LOADZ] = (est.i_load, est.q_load,
-                                                      est.q_load_jump, est.load_jump_z)
-    k[K_QX], k[K_QXD], k[K_BDIS] = est.q_x, est.q_x_disagree, est.b_dis
-    k[K_MON:K_MON + adapt.NMK] = est.monitor_k
-    e[E_MON:E_MON + adapt.NMS] = est.monitor_s
-    if est.noise_k is not None:
-        k[K_NADAPT] = 1.0
-        k[K_NL:K_NL + noise_level.NNK] = est.noise_k
-    e[E_NL:E_NL + noise_level.NNS] = est.noise_s
-    k[K_IFLOW] = kf.i_flow if est.chambers else -1.0
-    k[K_QFLOW], k[K_FLOWK], k[K_FLOWN] = est.q_flow, est.flow_k, est.flow_n
-    k[K_FLOWDP] = kf.dp_friction if est.chambers else 0.0
-    k[K_FLOWSH], k[K_FLOWREP] = est.flow_share, est.flow_report
-    e[E_FLOWN:E_FLOWN + adapt.NFLOW] = est.flow_s
-    k[K_OFFG], k[K_QXO] = est.offset_gate, est.q_x_offset
-    k[K_OFFA:K_OFFA + 3] = est.offset_alpha
-    e[E_OFFS:E_OFFS + adapt.NOFS] = est.offset_s
-    k[K_FD:K_FD + fd.NFK] = d.k
-    e[E_FD:E_FD + fd.NFS] = d.s
-    F, G = kf.F, kf.G
-    Fm, Gm = np.zeros((1, 1)), np.zeros((1, 1))
-    if est.chambers:
+        k[K_IFLOW], k[K_FLOWDP] = kf.i_flow, kf.dp_friction
         e[E_MODE] = kf.mode
         # F, G: the filter's own, overwritten per tick with the mode's pair
         # Gm: the stacked G (3 columns) then the unit-flow columns of adapt.parameter_columns
@@ -160,8 +166,8 @@ def pack(est):
         # (adapt.predict_jacobian)
         Fm = np.hstack((np.vstack([f for f, _ in kf.modes]), kf.Dm))
         Gm = np.hstack((np.vstack([g for _, g in kf.modes]), kf.Lm))
-    k[K_IMOVED], k[K_MOVEDZ] = (kf.i_moved, kf.moved_gate) if est.is_model else (-1.0, 0.0)
-    if est.is_model:
+    k[K_IMOVED], k[K_MOVEDZ] = (kf.i_moved, kf.moved_gate) if model else (-1.0, 0.0)
+    if model:
         u = kf.u
         g_leak = kf._g_leak if kf.i_leak is not None else np.zeros(1)
         H1, R1, y1, S1 = kf.H1, kf.R1, kf._y1, kf._S1
@@ -169,9 +175,31 @@ def pack(est):
         u, g_leak = kf._u, np.zeros(1)
         H1, R1, y1, S1 = kf.H, kf.R, kf.y, kf.S
     ws = np.zeros(workspace_size(len(kf.x), 3))
-    arrays = Arrays(kf.x, kf.P, F, G, u, kf.Q, kf._tmp, kf.H, kf.R, kf.y, kf.S, H1, R1, y1, S1,
-                    g_leak, np.zeros(kf.H.shape[0]), np.zeros(1), ws, Fm, Gm)
-    return k, e, arrays
+    return Arrays(kf.x, kf.P, F, G, u, kf.Q, kf._tmp, kf.H, kf.R, kf.y, kf.S, H1, R1, y1, S1,
+                  g_leak, np.zeros(kf.H.shape[0]), np.zeros(1), ws, Fm, Gm)
+
+
+def predict_filter(kf, chambers: bool, omega: float, p_D: float | None,
+                   w_friction: float | None) -> None:
+    """ModelKF / ChamberKF (``chambers``).predict, a filter on its own: :func:`predict_tick` with the speed
+    held at ``omega`` over the period, the friction's speed ``w_friction`` (default omega) and
+    the measured ``p_D`` (None: the filter's own) as given, not filtered. The filter's
+    constants and arrays are packed once (kf._alone); its state (check-valve mode, pressure
+    increments, friction model) is passed in and taken back on each call."""
+    if getattr(kf, '_alone', None) is None:
+        k, e = np.zeros(NK), np.zeros(NE)
+        kf._alone = k, e, pack_filter(kf, k, e, True, chambers)   # K_ALPHA_WF 0: as given
+    k, e, a = kf._alone
+    if chambers:
+        e[E_PLAST:E_PLAST + 4], e[E_FS:E_FS + adapt.NFS] = kf.p_last, kf.fs
+    e[E_OMEGA] = omega                       # the period's mean speed: (omega + omega) / 2
+    e[E_WFRIC] = omega if w_friction is None else w_friction
+    k[K_USE_P] = p_D is not None
+    e[E_PD_FILT] = 0.0 if p_D is None else p_D
+    predict_tick(k, e, a, omega)
+    if chambers:
+        kf.p_last[:], kf.fs[:] = e[E_PLAST:E_PLAST + 4], e[E_FS:E_FS + adapt.NFS]
+        kf.mode = int(e[E_MODE])
 
 
 @njit(cache=True)

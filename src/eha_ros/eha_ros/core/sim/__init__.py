@@ -4,6 +4,7 @@ batch.py      the stack in one process: BatchLoop (state(k) -> estimate(k) -> co
               BatchStack, the parameters of a node from its files in config/
 closed_loop.py  the compiled segment of BatchLoop: ticks without events in one call
 switchover.py the Table 3.4 switch-over runs with the switch manager, and their figures
+pid_loop.py   the thesis' Table 3.8 PID in BatchLoop: around the plant, on the estimate
 compare.py    two campaign folders compared run by run (scripts/campaign --compare)
 family.py     the plant variants: Table 4.5 grid, Latin-hypercube boxes, files of multipliers
 scenarios.py  campaign scenarios (config/campaigns/*.yaml): signals, events and figures of merit

@@ -92,8 +92,11 @@ class BatchStack:
 
 
 class BatchLoop:
-    """Plant + estimator (or None: the loop closes on the measurement) + position controller
-    + switch manager (or None) in one process, tick by tick or fast.
+    """Plant + estimator (or None: the loop closes on the measurement, or with ``on_truth`` on
+    the true position) + position controller (the stack's QFT controller, or the Table 3.8 PID
+    behind its interface: core.controller.pid.PIDLoop) + switch manager (or None) in one
+    process, tick by tick or fast: the one closed-loop harness of the batch runs, campaigns,
+    the plant's and the estimator's thesis checks.
 
     :meth:`tick` is the reference semantics, what the nodes do (the loop body of
     core.sim.switchover.run); :meth:`run` with ``fast=True`` advances the ticks where
@@ -104,13 +107,20 @@ class BatchLoop:
     """
 
     def __init__(self, plant, estimator, controller, manager=None, hold_ticks: int = 0,
-                 faults=None, commands=None):
+                 faults=None, commands=None, events=None, on_truth: bool = False):
         """faults: {tick: [(name, channel, magnitude, duration), ...]} injected at the tick's
-        start; commands: {tick: [(channel, reason), ...]} to the manager after the estimate."""
+        start; commands: {tick: [(channel, reason), ...]} to the manager after the estimate;
+        events: {tick: [callable(plant), ...]} called at the tick's start (after the faults),
+        e.g. a channel switch without a manager; on_truth: without an estimator, the
+        controller reads the true position instead of the measured one."""
         self.plant, self.est, self.ctl, self.mgr = plant, estimator, controller, manager
         self.hold_ticks = hold_ticks
         self.faults = {int(k): list(v) for k, v in (faults or {}).items()}
         self.commands = {int(k): list(v) for k, v in (commands or {}).items()}
+        self.events = {int(k): list(v) for k, v in (events or {}).items()}
+        if on_truth and estimator is not None:
+            raise ValueError('on_truth: the loop closes on the estimate when there is one')
+        self.on_truth = on_truth
         if self.commands and manager is None:
             raise ValueError('commands need a switch manager')
         self.Ts = plant.Ts
@@ -125,25 +135,32 @@ class BatchLoop:
     def tick(self, k: int, reference: float, load: float, row) -> None:
         """Tick k as the stack does it; writes its record ``row`` (core.sim.closed_loop R_*)."""
         from .closed_loop import (R_ACTIVE, R_BYPASS, R_CHANNEL, R_EN, R_FAULT, R_I, R_IM,
-                                  R_INNOV, R_NIS, R_NISDIM, R_PM, R_STATE, R_T, R_U, R_VALVE,
-                                  R_W, R_WM, R_X, R_X0, R_XHAT, R_XM)
+                                  R_INNOV, R_NIS, R_NISDIM, R_P, R_PM, R_SKIP, R_STATE, R_T,
+                                  R_U, R_V0, R_VALVE, R_VERDICT, R_VHAT, R_W, R_WM, R_X, R_X0,
+                                  R_XHAT, R_XM)
+        from ..plant.layout import S_V
         from ..redundancy.health import ChannelSample
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
         t = k * self.Ts
         for f in self.faults.get(k, ()):
             self.responses.append((k, 'fault', plant.inject_fault(*f)))
+        for event in self.events.get(k, ()):
+            event(plant)
         m = plant.measure()
-        x0 = plant.position
+        x0, v0 = plant.position, float(plant.S[S_V])
         if est is not None:
             r = est.update(m.position, m.motor_speed, m.pressure_a, m.pressure_b,
                            m.active_channel, valid=m.valid)
             x_hat, nis, innov = r.position, r.nis, r.innovation
-            code, nd = r.sensor_fault, r.nis_dim
+            code, nd, v_hat, skipped = r.sensor_fault, r.nis_dim, r.velocity, r.update_skipped
             est_ok = r.nis_dim > 0 and not r.sensor_fault
             verdict, w_act = r.consistency, r.motor_speed
         else:
             x_hat, nis, est_ok, innov, code, nd = m.position, math.nan, False, math.nan, 0, 0
+            v_hat, skipped = math.nan, False
             verdict, w_act = 0, float(m.motor_speed[m.active_channel])
+            if self.on_truth:
+                x_hat = x0
         ctl.request(reference)
         if mgr is not None and SAFE.position_fault(verdict):
             mgr.safe_state(SAFE.manager_reason(verdict))
@@ -180,6 +197,8 @@ class BatchLoop:
         row[R_EN:R_EN + 2] = plant.measure().drive_enabled
         row[R_CHANNEL] = m.active_channel
         row[R_PM], row[R_PM + 1], row[R_IM:R_IM + 2] = m.pressure_a, m.pressure_b, m.motor_current
+        row[R_V0], row[R_VHAT], row[R_VERDICT], row[R_SKIP] = v0, v_hat, verdict, skipped
+        row[R_P], row[R_P + 1] = tr.pressure_a, tr.pressure_b
         if mgr is not None:
             from ..redundancy.state_machine import STATE_CODES
             row[R_ACTIVE], row[R_STATE] = mgr.active, STATE_CODES[mgr.name]
@@ -199,7 +218,7 @@ class BatchLoop:
         rec = np.zeros((n, NREC))
         k, end = k0, k0 + n
         fast = fast and self.fast_supported()
-        scheduled = sorted(set(self.faults) | set(self.commands))
+        scheduled = sorted(set(self.faults) | set(self.commands) | set(self.events))
         retry, wait = k, 1           # back off while segments stop at once (e.g. a stuck sensor)
         while k < end:
             stop = min([s for s in scheduled if s >= k] + [end])
@@ -215,8 +234,12 @@ class BatchLoop:
         return rec
 
     def fast_supported(self) -> bool:
+        """The compiled segment covers this loop: the stack's controller, closing on the
+        estimate or the measurement, an estimator configuration its kernel covers."""
+        from ..controller.position import PositionController
         from ..estimator import stepper as ES
-        return self.est is None or ES.supported(self.est)
+        return isinstance(self.ctl, PositionController) and not self.on_truth and \
+            (self.est is None or ES.supported(self.est))
 
     def _ready(self) -> bool:
         """Cheap Python-side check before packing: nothing that surely needs a Python tick."""

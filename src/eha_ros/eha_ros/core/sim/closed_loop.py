@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from ..controller import stepper as CS
+from ..estimator import adapt as EA
 from ..estimator import stepper as ES
 from ..jit_cache import drop_stale
 from ..plant import layout as L
@@ -50,7 +51,12 @@ R_STATE = 23     # switch manager's state code (ACTIVE_A 0, ACTIVE_B 1, SWITCHIN
                  # DEGRADED 3, FAILED_SAFE 4)
 R_PM = 24        # measured pressures p_A, p_B (Pa)
 R_IM = 26        # measured motor currents (2)
-NREC = 28
+R_V0 = 28        # true velocity at the tick start (m/s)
+R_VHAT = 29      # estimated velocity (m/s)
+R_VERDICT = 30   # estimator consistency verdict (adapt.VERDICTS)
+R_SKIP = 31      # 1: the estimator skipped this update
+R_P = 32         # true chamber pressures p_A, p_B after the step (Pa)
+NREC = 34
 
 
 @njit(cache=True)
@@ -122,6 +128,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
             reported[c] = U[L.U_EN0 + c] > 0.5
             fault[c] = U[L.U_FAIL0 + c] > 0.5
         x0 = S[L.S_X]
+        v0 = S[L.S_V]
         w_act = meas[L.M_W0 + ch]
         if has_est:
             x_hat, innov, nis, nd, code = ES.estimate(ek, ee, ea, pos, w_act, pa, pb)
@@ -164,6 +171,12 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
             r[R_EN + c] = U[L.U_EN0 + c] > 0.5
         r[R_PM] = pa
         r[R_PM + 1] = pb
+        r[R_V0] = v0
+        r[R_VHAT] = x[1] if has_est else math.nan
+        r[R_VERDICT] = ee[ES.E_MON + EA.MS_VERDICT] if has_est else 0
+        r[R_SKIP] = 0
+        r[R_P] = S[L.S_PA]
+        r[R_P + 1] = S[L.S_PB]
         r[R_IM] = i_meas[0]
         r[R_IM + 1] = i_meas[1]
         r[R_BYPASS] = S[L.S_FB]
