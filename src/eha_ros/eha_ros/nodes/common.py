@@ -1,13 +1,16 @@
 """rclpy plumbing shared by every node: parameters through the one loader, QoS, spinning.
 
-A node module defines a ``Schema`` and a ``make_node(params: dict) -> rclpy.node.Node``
-factory; :func:`run` does the rest. Parameter files are validated before ``rclpy.init``
-(so a malformed file gives one line, not an rcl traceback), then declared as read-only
-ROS parameters and validated again from what rclpy holds (``-p`` overrides included).
+A node module defines a ``Schema``, its node class (module level, without its rclpy base) and
+a ``make_node(params: dict, transport=None) -> rclpy.node.Node`` factory that puts the class
+on its transport (:func:`bind`: DDS, or eha_loop's in-process bus); :func:`run` does the rest.
+Parameter files are validated before ``rclpy.init`` (so a malformed file gives one line, not
+an rcl traceback), then declared as read-only ROS parameters and validated again from what
+rclpy holds (``-p`` overrides included).
 """
 from __future__ import annotations
 
 import contextlib
+import functools
 import gc
 import re
 import signal
@@ -142,21 +145,30 @@ def make_executor():
         return SingleThreadedExecutor()
 
 
-_BUS = None     # set by eha_ros.nodes.eha_loop while it builds co-located nodes
-
-
-def node_base():
-    """Base class of every EHA node: rclpy Node with ``callback_lock`` (taken by a node's own
-    loop thread around a tick). In a composed process (eha_loop) it is the process-wide lock
-    and topics between co-located nodes are delivered in-process (eha_ros.nodes.compose)."""
+@functools.cache
+def dds_transport():
+    """The transport of a standalone node: rclpy's Node over DDS, with a ``callback_lock``
+    (taken by a node's own loop thread around a tick) that does nothing. A composed process
+    (eha_loop) passes eha_ros.nodes.compose.composed_base(bus) instead: the process-wide lock,
+    and topics between co-located nodes delivered in-process."""
     from rclpy.node import Node
-    if _BUS is not None:
-        from .compose import composed_base
-        return composed_base(_BUS)
 
     class EhaNode(Node):
         callback_lock = contextlib.nullcontext()
     return EhaNode
+
+
+def bind(cls, transport=None):
+    """``cls`` (a node class written without its rclpy base) on ``transport``, the rclpy Node
+    class it runs on (None: :func:`dds_transport`); kept as ``transport`` on the class, whose
+    ``__init__`` the lifecycle nodes call before LifecycleNodeMixin's."""
+    return _bound(cls, transport or dds_transport())
+
+
+@functools.cache
+def _bound(cls, transport):
+    return type(cls.__name__, (cls, transport),
+                {'transport': transport, '__module__': cls.__module__})
 
 
 def node_kwargs() -> dict:

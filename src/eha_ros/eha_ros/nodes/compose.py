@@ -115,7 +115,8 @@ def is_latched(qos_profile) -> bool:
 
 
 def composed_base(bus: Bus):
-    """rclpy Node subclass whose topics, timers and services go through ``bus``."""
+    """The transport of the nodes of a composed process (nodes.common.bind): an rclpy Node
+    subclass whose topics, timers and services go through ``bus``."""
     from rclpy.node import Node
 
     class ComposedNode(Node):

@@ -77,14 +77,11 @@ def main(argv=None) -> int:
         sys.setswitchinterval(GIL_SWITCH_INTERVAL)
 
         def make_nodes():
-            from .compose import Bus
+            from .compose import Bus, composed_base
             bus = Bus()
             bus.guests.update(n for n in names if n in GUESTS)
-            common._BUS = bus
-            try:
-                nodes = [modules[n].make_node(params[n]) for n in names]
-            finally:
-                common._BUS = None
+            transport = composed_base(bus)
+            nodes = [modules[n].make_node(params[n], transport) for n in names]
             bus.finalize()
             nodes[0].get_logger().info(
                 f'eha_loop: {", ".join(names)} in one process; in-process topics: '

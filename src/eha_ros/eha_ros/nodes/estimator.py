@@ -12,183 +12,185 @@ from __future__ import annotations
 import sys
 import time
 
+from eha_msgs.msg import ActuatorState, PositionEstimate
+
 from ..core.estimator.estimator import Estimator
 from ..core.estimator.fault_detector import NAMES
 from ..core.estimator.params import SCHEMA
 from ..core.loop.stats import Counters, LoopStats
 from . import diag
-from .common import (clock_s, declare_and_validate, node_base, publish_counted, run,
-                     stream_qos)
+from .common import bind, clock_s, declare_and_validate, publish_counted, run, stream_qos
 
 STATE_QUEUE_DEPTH = 20      # states (20 ms at 1 kHz): rides out short stalls without a long backlog
 
 
-def make_node(params: dict):
-    Node = node_base()
-    from eha_msgs.msg import ActuatorState, PositionEstimate
+class EstimatorNode:
+    """The estimator node (rclpy base: its transport, common.bind)."""
 
-    class EstimatorNode(Node):
-        def __init__(self):
-            super().__init__('estimator')
-            self.p = declare_and_validate(self, SCHEMA, params)
-            self.est = Estimator(self.p)
-            self.stale_time = self.p['estimator.node.stale_time']
-            self.c = Counters()
-            self.loop = LoopStats(self.est.Ts)
-            self.last_arrival = None
-            self.last_seq = None
-            self.verdict = 0                  # core.estimator.adapt verdict last logged
+    def __init__(self, params: dict):
+        super().__init__('estimator')
+        self.p = declare_and_validate(self, SCHEMA, params)
+        self.est = Estimator(self.p)
+        self.stale_time = self.p['estimator.node.stale_time']
+        self.c = Counters()
+        self.loop = LoopStats(self.est.Ts)
+        self.last_arrival = None
+        self.last_seq = None
+        self.verdict = 0                  # core.estimator.adapt verdict last logged
+        self.stale = False
+        self.stale_seq = 0
+        self.msg = PositionEstimate()
+        qos = stream_qos()
+        self.pub = self.create_publisher(PositionEstimate, 'eha/estimate', qos)
+        # a deeper input queue: after a scheduling stall the queued states are still
+        # answered (their provisional stale predictions are replaced), not dropped
+        in_qos = stream_qos()
+        in_qos.depth = STATE_QUEUE_DEPTH
+        self.pub_diag = diag.publisher(self)
+        self.create_subscription(ActuatorState, 'eha/state', self.on_state, in_qos)
+        self.create_timer(self.p['estimator.node.timer_period'], self.on_timer)
+        self.create_timer(self.p['estimator.node.diagnostics_period'],
+                          self.publish_diagnostics)
+        self.get_logger().info(
+            f'estimator: filter={self.p["estimator.filter"]}, '
+            f'measurements={self.p["estimator.measurements"]}, '
+            f'stale after {self.stale_time * 1e3:.1f} ms')
+
+    def on_state(self, msg):
+        if self.last_seq is not None and msg.seq == self.last_seq == self.msg.seq and \
+                not self.msg.stale:
+            # a re-sent state (lock-step plant waiting for its command): the same answer
+            # again, filter untouched, so lock-step runs stay deterministic
+            self.c.bump('repeated_states')
+            publish_counted(self, self.pub, self.msg, f'estimate {msg.seq}')
+            return
+        t0 = time.perf_counter()
+        now = clock_s(self)
+        self.loop.arrived(now)
+        self.last_arrival = now
+        ticks = 1
+        if self.last_seq is not None:
+            if msg.seq > self.last_seq + 1:
+                self.c.bump('lost_states', int(msg.seq - self.last_seq - 1))
+                ticks = int(msg.seq - self.last_seq)
+            elif msg.seq <= self.last_seq:
+                self.c.bump('out_of_order_states')
+        if self.stale:
             self.stale = False
-            self.stale_seq = 0
-            self.msg = PositionEstimate()
-            qos = stream_qos()
-            self.pub = self.create_publisher(PositionEstimate, 'eha/estimate', qos)
-            # a deeper input queue: after a scheduling stall the queued states are still
-            # answered (their provisional stale predictions are replaced), not dropped
-            in_qos = stream_qos()
-            in_qos.depth = STATE_QUEUE_DEPTH
-            self.pub_diag = diag.publisher(self)
-            self.create_subscription(ActuatorState, 'eha/state', self.on_state, in_qos)
-            self.create_timer(self.p['estimator.node.timer_period'], self.on_timer)
-            self.create_timer(self.p['estimator.node.diagnostics_period'],
-                              self.publish_diagnostics)
-            self.get_logger().info(
-                f'estimator: filter={self.p["estimator.filter"]}, '
-                f'measurements={self.p["estimator.measurements"]}, '
-                f'stale after {self.stale_time * 1e3:.1f} ms')
+            self.get_logger().info(f'states back at seq {msg.seq}',
+                                   throttle_duration_sec=1.0)
+        self.last_seq = msg.seq
+        r = self.est.update(msg.position, msg.motor_speed, msg.pressure_a, msg.pressure_b,
+                            msg.active_channel, ticks, msg.valid)
+        self.c.bump('estimates')
+        if r.consistency != self.verdict:      # one log line per verdict change (issue 15)
+            self.on_verdict(r.consistency, msg.seq)
+        if r.rejected and msg.valid:     # invalid states: counted, not warned (repeats)
+            self.c.bump('rejected_states')
+            self.get_logger().warning(
+                f'state seq {msg.seq}: rejected {r.rejected} '
+                f'({"predict only" if r.update_skipped else "partial update"})',
+                throttle_duration_sec=1.0)
+        self.publish(r, msg.header.stamp, msg.seq, False)
+        self.loop.executed(time.perf_counter() - t0)
 
-        def on_state(self, msg):
-            if self.last_seq is not None and msg.seq == self.last_seq == self.msg.seq and \
-                    not self.msg.stale:
-                # a re-sent state (lock-step plant waiting for its command): the same answer
-                # again, filter untouched, so lock-step runs stay deterministic
-                self.c.bump('repeated_states')
-                publish_counted(self, self.pub, self.msg, f'estimate {msg.seq}')
-                return
-            t0 = time.perf_counter()
-            now = clock_s(self)
-            self.loop.arrived(now)
-            self.last_arrival = now
-            ticks = 1
-            if self.last_seq is not None:
-                if msg.seq > self.last_seq + 1:
-                    self.c.bump('lost_states', int(msg.seq - self.last_seq - 1))
-                    ticks = int(msg.seq - self.last_seq)
-                elif msg.seq <= self.last_seq:
-                    self.c.bump('out_of_order_states')
-            if self.stale:
-                self.stale = False
-                self.get_logger().info(f'states back at seq {msg.seq}',
-                                       throttle_duration_sec=1.0)
-            self.last_seq = msg.seq
-            r = self.est.update(msg.position, msg.motor_speed, msg.pressure_a, msg.pressure_b,
-                                msg.active_channel, ticks, msg.valid)
-            self.c.bump('estimates')
-            if r.consistency != self.verdict:      # one log line per verdict change (issue 15)
-                self.on_verdict(r.consistency, msg.seq)
-            if r.rejected and msg.valid:     # invalid states: counted, not warned (repeats)
-                self.c.bump('rejected_states')
-                self.get_logger().warning(
-                    f'state seq {msg.seq}: rejected {r.rejected} '
-                    f'({"predict only" if r.update_skipped else "partial update"})',
-                    throttle_duration_sec=1.0)
-            self.publish(r, msg.header.stamp, msg.seq, False)
-            self.loop.executed(time.perf_counter() - t0)
+    def on_verdict(self, verdict: int, seq: int):
+        from ..core.estimator import adapt
+        self.verdict = verdict
+        name = adapt.VERDICTS[verdict]
+        if adapt.safe_state(verdict):
+            self.get_logger().error(f'seq {seq}: {name}: the position sensor is faulty '
+                                    f'(safe state required: core.loop.safe_state)')
+        elif adapt.alarm(verdict):
+            self.get_logger().error(f'seq {seq}: {name}: filter and position sensor disagree '
+                                    f'beyond the sensor band (the estimate falls back on '
+                                    f'the sensor)')
+        elif verdict == adapt.MODEL:
+            self.get_logger().warning(f'seq {seq}: model_mismatch (adaptive model at its '
+                                      f'bound, persistent innovation bias, or an '
+                                      f'unmodelled flow: under load a leak or a drifting '
+                                      f'position sensor)')
+        else:
+            self.get_logger().info(f'seq {seq}: consistency ok')
+        if adapt.alarm(verdict):         # on /diagnostics now: an alarm shorter than the
+            self.publish_diagnostics()   # diagnostics period would otherwise be missed
 
-        def on_verdict(self, verdict: int, seq: int):
-            from ..core.estimator import adapt
-            self.verdict = verdict
-            name = adapt.VERDICTS[verdict]
-            if adapt.safe_state(verdict):
-                self.get_logger().error(f'seq {seq}: {name}: the position sensor is faulty '
-                                        f'(safe state required: core.loop.safe_state)')
-            elif adapt.alarm(verdict):
-                self.get_logger().error(f'seq {seq}: {name}: filter and position sensor disagree '
-                                        f'beyond the sensor band (the estimate falls back on '
-                                        f'the sensor)')
-            elif verdict == adapt.MODEL:
-                self.get_logger().warning(f'seq {seq}: model_mismatch (adaptive model at its '
-                                          f'bound, persistent innovation bias, or an '
-                                          f'unmodelled flow: under load a leak or a drifting '
-                                          f'position sensor)')
-            else:
-                self.get_logger().info(f'seq {seq}: consistency ok')
-            if adapt.alarm(verdict):         # on /diagnostics now: an alarm shorter than the
-                self.publish_diagnostics()   # diagnostics period would otherwise be missed
+    def on_timer(self):
+        if self.last_arrival is None:
+            return
+        if clock_s(self) - self.last_arrival <= self.stale_time:
+            return
+        if not self.stale:
+            self.stale = True
+            self.stale_seq = self.last_seq
+            self.c.bump('stale_events')
+            self.get_logger().warning(
+                f'no state for {self.stale_time * 1e3:.1f} ms after seq {self.last_seq}: '
+                f'publishing predict-only estimates marked stale',
+                throttle_duration_sec=1.0)
+        self.stale_seq += 1
+        r = self.est.predict_only()
+        self.c.bump('stale_estimates')
+        self.publish(r, self.get_clock().now().to_msg(), self.stale_seq, True)
 
-        def on_timer(self):
-            if self.last_arrival is None:
-                return
-            if clock_s(self) - self.last_arrival <= self.stale_time:
-                return
-            if not self.stale:
-                self.stale = True
-                self.stale_seq = self.last_seq
-                self.c.bump('stale_events')
-                self.get_logger().warning(
-                    f'no state for {self.stale_time * 1e3:.1f} ms after seq {self.last_seq}: '
-                    f'publishing predict-only estimates marked stale',
-                    throttle_duration_sec=1.0)
-            self.stale_seq += 1
-            r = self.est.predict_only()
-            self.c.bump('stale_estimates')
-            self.publish(r, self.get_clock().now().to_msg(), self.stale_seq, True)
+    def publish(self, r, stamp, seq, stale):
+        m = self.msg
+        m.header.stamp = stamp
+        m.seq = int(seq)
+        m.position, m.velocity = r.position, r.velocity
+        m.pressure_diff, m.position_variance = r.pressure_diff, r.position_variance
+        m.innovation, m.nis = r.innovation, r.nis
+        m.motor_speed = r.motor_speed
+        m.stale, m.update_skipped = stale, r.update_skipped
+        m.sensor_fault = int(r.sensor_fault)
+        m.consistency = int(r.consistency)
+        publish_counted(self, self.pub, m, f'estimate {seq}')
 
-        def publish(self, r, stamp, seq, stale):
-            m = self.msg
-            m.header.stamp = stamp
-            m.seq = int(seq)
-            m.position, m.velocity = r.position, r.velocity
-            m.pressure_diff, m.position_variance = r.pressure_diff, r.position_variance
-            m.innovation, m.nis = r.innovation, r.nis
-            m.motor_speed = r.motor_speed
-            m.stale, m.update_skipped = stale, r.update_skipped
-            m.sensor_fault = int(r.sensor_fault)
-            m.consistency = int(r.consistency)
-            publish_counted(self, self.pub, m, f'estimate {seq}')
+    @diag.reader
+    def publish_diagnostics(self):
+        values = self.loop.values()
+        values.update({'stale': self.stale,
+                       'last_seq': self.last_seq if self.last_seq is not None else -1,
+                       'sensor_fault': NAMES[self.est.detector.code],
+                       'position_variance_m2': self.est.kf.position_variance})
+        values.update(self.c)
+        values.update({f'estimator_{k}': v for k, v in self.est.counters.items()})
+        values['estimator_updates'] = self.est.updates      # beside skipped/isolated_updates
+        for code, n in self.est.detector.detections.items():
+            values[f'detections_{NAMES[code]}'] = n
+        if self.est.is_model and self.est.kf.i_leak is not None:
+            values['leak_correction_m3_per_s_pa'] = self.est.kf.leak_correction
+        alphas = self.est.friction_alphas
+        if alphas is not None:
+            values.update(alpha_1=alphas[0], alpha_2=alphas[1], alpha_3=alphas[2])
+        from ..core.estimator import adapt
+        values['consistency'] = adapt.VERDICTS[self.est.consistency]
+        values['safe_state_required'] = self.est.safe_state_required
+        kf = self.est.kf
+        for name in ('leakage', 'displacement', 'compliance'):
+            if hasattr(kf, f'{name}_correction'):
+                values[f'{name}_correction'] = getattr(kf, f'{name}_correction')
+        bad = self.stale or self.est.detector.code or self.c.get('rejected_states', 0)
+        level = diag.WARN if bad else diag.OK
+        msg = 'ok' if level == diag.OK else 'stale, sensor fault or measurements rejected'
+        levels = self.est.noise_levels
+        if levels is not None:
+            values['noise_level_position'], values['noise_level_pressure'] = levels[:2]
+            if levels[2] and level == diag.OK:
+                level, msg = diag.WARN, ('sensor noise at the top of '
+                                         'estimator.noise.adapt_range: R no longer matches it')
+        if adapt.alarm(self.est.consistency):
+            level = diag.ERROR
+            msg = (f'{values["consistency"]}: ' +
+                   ('position sensor faulty, safe state required'
+                    if self.est.safe_state_required else
+                    'filter and sensor disagree beyond the band'))
+        diag.publish(self, self.pub_diag, f'filter {self.get_namespace()}', values, level, msg)
 
-        @diag.reader
-        def publish_diagnostics(self):
-            values = self.loop.values()
-            values.update({'stale': self.stale,
-                           'last_seq': self.last_seq if self.last_seq is not None else -1,
-                           'sensor_fault': NAMES[self.est.detector.code],
-                           'position_variance_m2': self.est.kf.position_variance})
-            values.update(self.c)
-            values.update({f'estimator_{k}': v for k, v in self.est.counters.items()})
-            values['estimator_updates'] = self.est.updates      # beside skipped/isolated_updates
-            for code, n in self.est.detector.detections.items():
-                values[f'detections_{NAMES[code]}'] = n
-            if self.est.is_model and self.est.kf.i_leak is not None:
-                values['leak_correction_m3_per_s_pa'] = self.est.kf.leak_correction
-            alphas = self.est.friction_alphas
-            if alphas is not None:
-                values.update(alpha_1=alphas[0], alpha_2=alphas[1], alpha_3=alphas[2])
-            from ..core.estimator import adapt
-            values['consistency'] = adapt.VERDICTS[self.est.consistency]
-            values['safe_state_required'] = self.est.safe_state_required
-            kf = self.est.kf
-            for name in ('leakage', 'displacement', 'compliance'):
-                if hasattr(kf, f'{name}_correction'):
-                    values[f'{name}_correction'] = getattr(kf, f'{name}_correction')
-            bad = self.stale or self.est.detector.code or self.c.get('rejected_states', 0)
-            level = diag.WARN if bad else diag.OK
-            msg = 'ok' if level == diag.OK else 'stale, sensor fault or measurements rejected'
-            levels = self.est.noise_levels
-            if levels is not None:
-                values['noise_level_position'], values['noise_level_pressure'] = levels[:2]
-                if levels[2] and level == diag.OK:
-                    level, msg = diag.WARN, ('sensor noise at the top of '
-                                             'estimator.noise.adapt_range: R no longer matches it')
-            if adapt.alarm(self.est.consistency):
-                level = diag.ERROR
-                msg = (f'{values["consistency"]}: ' +
-                       ('position sensor faulty, safe state required'
-                        if self.est.safe_state_required else
-                        'filter and sensor disagree beyond the band'))
-            diag.publish(self, self.pub_diag, f'filter {self.get_namespace()}', values, level, msg)
 
-    return EstimatorNode()
+def make_node(params: dict, transport=None):
+    """The estimator on ``transport`` (None: DDS; common.bind)."""
+    return bind(EstimatorNode, transport)(params)
 
 
 def main(argv=None) -> int:

@@ -30,8 +30,8 @@ PROGRAM = Program('hardware_bridge', SCHEMA, LOOP_PREFIX['hardware_bridge'], har
                   bridge_services=True, exclusive=True)
 
 
-def make_node(params: dict):
-    return make_plant_side(params, PROGRAM)
+def make_node(params: dict, transport=None):
+    return make_plant_side(params, PROGRAM, transport)
 
 
 def main(argv=None) -> int:

@@ -25,8 +25,8 @@ def hardware(p: dict, counters):
 PROGRAM = Program('plant_sim', SCHEMA, LOOP_PREFIX['plant_sim'], hardware)
 
 
-def make_node(params: dict):
-    return make_plant_side(params, PROGRAM)
+def make_node(params: dict, transport=None):
+    return make_plant_side(params, PROGRAM, transport)
 
 
 def main(argv=None) -> int:

@@ -16,7 +16,7 @@ import time
 from ..core.io.mcap_sink import McapSink
 from ..core.io.recorder_params import SCHEMA
 from . import diag
-from .common import declare_and_validate, node_base, run
+from .common import bind, declare_and_validate, run
 from .tap import TopicTap, qos_yaml
 
 
@@ -24,82 +24,84 @@ def default_output() -> str:
     return os.path.join('out', datetime.datetime.now().strftime('recording_%Y%m%d-%H%M%S.mcap'))
 
 
-def make_node(params: dict):
-    Node = node_base()
+class Recorder:
+    """The recorder node (rclpy base: its transport, common.bind)."""
 
-    class Recorder(Node):
-        def __init__(self):
-            super().__init__('recorder')
-            self.p = p = declare_and_validate(self, SCHEMA, params)
-            extra = {t for t in p['recorder.extra_topics'] if t}
-            if p['recorder.diagnostics']:
-                extra.add('/diagnostics')
-            self.output = p['recorder.output'] or default_output()
-            self.sink = McapSink(self.output, p['recorder.compression'],
-                                 p['recorder.chunk_size'], on_error=self.on_write_error)
-            self.started = time.monotonic()
-            self.closed = False
-            self.exit_code = 0
-            self.pub_diag = diag.publisher(self)
-            from rclpy.clock import Clock, ClockType
-            wall = Clock(clock_type=ClockType.STEADY_TIME)
-            self.create_timer(p['recorder.diagnostics_period'], self.publish_diagnostics,
-                              clock=wall)
-            self.tap = TopicTap(self, p['recorder.namespace'], extra, p['recorder.depth'],
-                                self.open_topic, 'recording')
-            self.create_timer(p['recorder.discovery_period'], self.tap.discover, clock=wall)
-            self.get_logger().info(f'recorder: {self.tap.ns}/*{" + " if extra else ""}'
-                                   f'{", ".join(sorted(extra))} -> {self.output}')
-            self.tap.discover()
+    def __init__(self, params: dict):
+        super().__init__('recorder')
+        self.p = p = declare_and_validate(self, SCHEMA, params)
+        extra = {t for t in p['recorder.extra_topics'] if t}
+        if p['recorder.diagnostics']:
+            extra.add('/diagnostics')
+        self.output = p['recorder.output'] or default_output()
+        self.sink = McapSink(self.output, p['recorder.compression'],
+                             p['recorder.chunk_size'], on_error=self.on_write_error)
+        self.started = time.monotonic()
+        self.closed = False
+        self.exit_code = 0
+        self.pub_diag = diag.publisher(self)
+        from rclpy.clock import Clock, ClockType
+        wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(p['recorder.diagnostics_period'], self.publish_diagnostics,
+                          clock=wall)
+        self.tap = TopicTap(self, p['recorder.namespace'], extra, p['recorder.depth'],
+                            self.open_topic, 'recording')
+        self.create_timer(p['recorder.discovery_period'], self.tap.discover, clock=wall)
+        self.get_logger().info(f'recorder: {self.tap.ns}/*{" + " if extra else ""}'
+                               f'{", ".join(sorted(extra))} -> {self.output}')
+        self.tap.discover()
 
-        def open_topic(self, topic, type_name, definition, stamped, ends, offered):
-            meta = {'offered_qos_profiles': qos_yaml(ends) if offered else ''}
-            cid = self.sink.add_topic(topic, type_name, definition, stamped, meta)
-            put, now = self.sink.put, time.time_ns
-            return lambda data: put(cid, now(), data)
+    def open_topic(self, topic, type_name, definition, stamped, ends, offered):
+        meta = {'offered_qos_profiles': qos_yaml(ends) if offered else ''}
+        cid = self.sink.add_topic(topic, type_name, definition, stamped, meta)
+        put, now = self.sink.put, time.time_ns
+        return lambda data: put(cid, now(), data)
 
-        def on_write_error(self, text: str):
-            """Writer thread, once: the recording stopped (disk full): say so now."""
-            self.get_logger().error(f'recorder: {text}: recording stopped')
-            self.publish_diagnostics()
+    def on_write_error(self, text: str):
+        """Writer thread, once: the recording stopped (disk full): say so now."""
+        self.get_logger().error(f'recorder: {text}: recording stopped')
+        self.publish_diagnostics()
 
-        def counts(self) -> dict:
-            return {self.sink.topics[c]: self.sink.received[c] for c in self.sink.topics}
+    def counts(self) -> dict:
+        return {self.sink.topics[c]: self.sink.received[c] for c in self.sink.topics}
 
-        def publish_diagnostics(self, final: bool = False):
-            counts = self.counts()
-            values = {'output': self.output, 'topics': len(counts),
-                      'messages': sum(counts.values()), 'backlog': self.sink.backlog(),
-                      'elapsed_s': time.monotonic() - self.started, 'finished': final}
-            values.update({f'count {t}': n for t, n in sorted(counts.items())})
-            if self.sink.error:
-                values['error'] = self.sink.error
-            diag.publish(self, self.pub_diag, 'mcap', values,
-                         diag.ERROR if self.sink.error else diag.OK, self.sink.error or 'ok')
+    def publish_diagnostics(self, final: bool = False):
+        counts = self.counts()
+        values = {'output': self.output, 'topics': len(counts),
+                  'messages': sum(counts.values()), 'backlog': self.sink.backlog(),
+                  'elapsed_s': time.monotonic() - self.started, 'finished': final}
+        values.update({f'count {t}': n for t, n in sorted(counts.items())})
+        if self.sink.error:
+            values['error'] = self.sink.error
+        diag.publish(self, self.pub_diag, 'mcap', values,
+                     diag.ERROR if self.sink.error else diag.OK, self.sink.error or 'ok')
 
-        def close(self):
-            """Drain, finish the file, report counts (log and /diagnostics)."""
-            if self.closed:
-                return
-            self.closed = True
-            drained = self.tap.drain()
-            written = self.sink.close()
-            total = sum(written.values())
-            size = os.path.getsize(self.output) if os.path.exists(self.output) else 0
-            log = self.get_logger()
-            if self.sink.error:
-                self.exit_code = 1
-                log.error(f'recorder: {self.sink.error}')
-            log.info(f'recorder: {total} messages on {len(written)} topics '
-                     f'({drained} drained at exit), {size / 1e6:.2f} MB in {self.output}')
-            for topic, n in sorted(written.items()):
-                log.info(f'recorder: {topic}: {n}')
-            try:
-                self.publish_diagnostics(final=True)
-            except Exception:                # context already shut down: the log has it
-                pass
+    def close(self):
+        """Drain, finish the file, report counts (log and /diagnostics)."""
+        if self.closed:
+            return
+        self.closed = True
+        drained = self.tap.drain()
+        written = self.sink.close()
+        total = sum(written.values())
+        size = os.path.getsize(self.output) if os.path.exists(self.output) else 0
+        log = self.get_logger()
+        if self.sink.error:
+            self.exit_code = 1
+            log.error(f'recorder: {self.sink.error}')
+        log.info(f'recorder: {total} messages on {len(written)} topics '
+                 f'({drained} drained at exit), {size / 1e6:.2f} MB in {self.output}')
+        for topic, n in sorted(written.items()):
+            log.info(f'recorder: {topic}: {n}')
+        try:
+            self.publish_diagnostics(final=True)
+        except Exception:                # context already shut down: the log has it
+            pass
 
-    return Recorder()
+
+def make_node(params: dict, transport=None):
+    """The recorder on ``transport`` (None: DDS; common.bind)."""
+    return bind(Recorder, transport)(params)
 
 
 def main(argv=None) -> int:

@@ -18,13 +18,17 @@ import os
 import sys
 import time
 
+from eha_msgs.msg import (ActuatorCommand, ActuatorState, ExternalLoad, PlantTruth,
+                          PositionEstimate, PositionReference)
+from lifecycle_msgs.msg import State
+
 from ..core.config.params import default_config_dir, load
 from ..core.io.report import run_dir
 from ..core.sweep.params import SCHEMA, build_plan
 from ..core.loop.stats import LoopStats
 from ..core.sweep.session import from_params, print_table
 from . import diag
-from .common import (PLANT_STATE_TOPIC, declare_and_validate, latched_qos, node_base,
+from .common import (PLANT_STATE_TOPIC, bind, declare_and_validate, latched_qos,
                      publish_counted, run, stream_qos)
 
 MARGIN_TICKS = 30           # data of a tick is complete this many ticks after its state
@@ -45,138 +49,136 @@ def model_overlay(p: dict):
     return (lambda f: closed_loop(p, G, F, f)), path
 
 
-def make_node(params: dict):
-    Node = node_base()
-    from eha_msgs.msg import (ActuatorCommand, ActuatorState, ExternalLoad, PlantTruth,
-                              PositionEstimate, PositionReference)
-    from lifecycle_msgs.msg import State
+class Sweep:
+    """The sweep node (rclpy base: its transport, common.bind)."""
 
-    plan = build_plan(params)          # one-line error for a bad sweep, before ROS starts
+    def __init__(self, params: dict):
+        plan = build_plan(params)          # one-line error for a bad sweep, before ROS starts
+        super().__init__('sweep')
+        self.p = p = declare_and_validate(self, SCHEMA, params)
+        self.plan = plan
+        self.lead = p['sweep.lead_ticks']
+        model, ctl_file = model_overlay(p)
+        self.out = run_dir(p['sweep.out_dir'], p['sweep.run_name'] or None)
+        meta = {'mode': p['sweep.mode'], 'amplitude_m': p['sweep.amplitude'],
+                'offset_m': p['sweep.offset'], 'source': 'sweep node over DDS',
+                'controller_file': ctl_file}
+        self.session = from_params(p, plan, self.out, meta, model)
+        self.ref_msg = PositionReference()
+        self.load_msg = ExternalLoad()
+        self.pub_load = None
+        if self.session.excite == 'load':
+            self.pub_load = self.create_publisher(ExternalLoad, 'eha/sim/load_force',
+                                                  stream_qos())
+        self.loop = LoopStats(plan.Ts)
+        self.ready_since = None
+        self.commands_seen = 0
+        self.plant_active = True           # eha/plant_state; not heard: taken as active
+        self.done = False
+        self.exit_code = 0
+        qos = stream_qos()
+        self.pub = self.create_publisher(PositionReference, 'eha/reference', qos)
+        self.pub_diag = diag.publisher(self)
+        self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
+                                 latched_qos())
+        self.create_subscription(ActuatorState, 'eha/state', self.on_state, qos)
+        self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
+        self.create_subscription(PlantTruth, 'eha/sim/truth', self.on_truth, qos)
+        self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.get_logger().info(
+            f'sweep: {p["sweep.mode"]}, {plan.n_ticks * plan.Ts:.1f} s planned, writing '
+            f'{self.out}/')
 
-    class Sweep(Node):
-        def __init__(self):
-            super().__init__('sweep')
-            self.p = p = declare_and_validate(self, SCHEMA, params)
-            self.plan = plan
-            self.lead = p['sweep.lead_ticks']
-            model, ctl_file = model_overlay(p)
-            self.out = run_dir(p['sweep.out_dir'], p['sweep.run_name'] or None)
-            meta = {'mode': p['sweep.mode'], 'amplitude_m': p['sweep.amplitude'],
-                    'offset_m': p['sweep.offset'], 'source': 'sweep node over DDS',
-                    'controller_file': ctl_file}
-            self.session = from_params(p, plan, self.out, meta, model)
-            self.ref_msg = PositionReference()
-            self.load_msg = ExternalLoad()
-            self.pub_load = None
-            if self.session.excite == 'load':
-                self.pub_load = self.create_publisher(ExternalLoad, 'eha/sim/load_force',
-                                                      stream_qos())
-            self.loop = LoopStats(plan.Ts)
-            self.ready_since = None
-            self.commands_seen = 0
-            self.plant_active = True           # eha/plant_state; not heard: taken as active
-            self.done = False
-            self.exit_code = 0
-            qos = stream_qos()
-            self.pub = self.create_publisher(PositionReference, 'eha/reference', qos)
-            self.pub_diag = diag.publisher(self)
-            self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
-                                     latched_qos())
-            self.create_subscription(ActuatorState, 'eha/state', self.on_state, qos)
-            self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
-            self.create_subscription(PlantTruth, 'eha/sim/truth', self.on_truth, qos)
-            self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
-            self.create_timer(1.0, self.publish_diagnostics)
-            self.get_logger().info(
-                f'sweep: {p["sweep.mode"]}, {plan.n_ticks * plan.Ts:.1f} s planned, writing '
-                f'{self.out}/')
+    def on_plant_state(self, msg):
+        self.plant_active = msg.id == State.PRIMARY_STATE_ACTIVE
 
-        def on_plant_state(self, msg):
-            self.plant_active = msg.id == State.PRIMARY_STATE_ACTIVE
+    def on_command(self, msg):
+        self.commands_seen += 1
+        self.session.record('command', msg.seq, msg.motor_speed_ref)
 
-        def on_command(self, msg):
-            self.commands_seen += 1
-            self.session.record('command', msg.seq, msg.motor_speed_ref)
+    def on_truth(self, msg):
+        self.session.record('truth', msg.seq, msg.position)
+        self.session.record('load', msg.seq, msg.load_force)
 
-        def on_truth(self, msg):
-            self.session.record('truth', msg.seq, msg.position)
-            self.session.record('load', msg.seq, msg.load_force)
+    def on_estimate(self, msg):
+        self.session.record('estimate', msg.seq, msg.position)
+        if self.session.check_error(msg.seq, msg.position):
+            self.get_logger().error(f'sweep {self.session.aborted}; reference back to the '
+                                    f'offset')
+            self.end()
 
-        def on_estimate(self, msg):
-            self.session.record('estimate', msg.seq, msg.position)
-            if self.session.check_error(msg.seq, msg.position):
-                self.get_logger().error(f'sweep {self.session.aborted}; reference back to the '
-                                        f'offset')
-                self.end()
+    def on_state(self, msg):
+        self.loop.timed(self.handle_state, msg)
 
-        def on_state(self, msg):
-            self.loop.timed(self.handle_state, msg)
-
-        def handle_state(self, msg):
-            s = self.session
-            k = msg.seq
-            if s.seq0 is None:
-                if self.commands_seen == 0 or not self.plant_active:
-                    self.ready_since = None
-                    return                         # wait for an active loop
-                now = time.monotonic()
-                self.ready_since = self.ready_since or now
-                if now - self.ready_since < self.p['sweep.start_delay']:
-                    self.send(k + self.lead, s.reference_for(k + self.lead))
-                    return
-                s.start(k + self.lead)
-                self.get_logger().info(f'sweep started at tick {k + self.lead}')
-            s.record('measured', k, msg.position)
-            s.record('motor_speed_0', k, msg.motor_speed[0])
-            s.record('motor_speed_1', k, msg.motor_speed[1])
-            s.record('active_channel', k, msg.active_channel)
-            s.record('reference', k, s.reference_for(k))
-            self.send(k + self.lead, s.reference_for(k + self.lead), s.load_for(k + self.lead))
-            for point in s.progress(k - MARGIN_TICKS):
-                self.get_logger().info(s.describe(point))
-            if not self.done and k - s.seq0 >= s.n_run + MARGIN_TICKS:
-                self.end()
-
-        def send(self, seq, position, load=0.0):
-            m = self.ref_msg
-            m.seq = int(seq)
-            m.position = float(position)
-            publish_counted(self, self.pub, m, f'reference {seq}')
-            if self.pub_load is not None:
-                self.load_msg.force = float(load)
-                publish_counted(self, self.pub_load, self.load_msg, f'load {seq}')
-
-        def end(self, reason=None):
-            """Finish the report; reference back to the offset; exit if asked to."""
-            if self.session.finished:
+    def handle_state(self, msg):
+        s = self.session
+        k = msg.seq
+        if s.seq0 is None:
+            if self.commands_seen == 0 or not self.plant_active:
+                self.ready_since = None
+                return                         # wait for an active loop
+            now = time.monotonic()
+            self.ready_since = self.ready_since or now
+            if now - self.ready_since < self.p['sweep.start_delay']:
+                self.send(k + self.lead, s.reference_for(k + self.lead))
                 return
-            self.send(0, self.session.position)
-            summary = self.session.finish(reason=reason)
-            print_table(summary, lambda line: self.get_logger().info(line))
-            self.get_logger().info(f'report: {self.out}/ (summary.json, data.csv, '
-                                   f'{"stiffness" if self.session.excite == "load" else "bode"}.png)')
-            if not summary['complete']:
-                self.exit_code = 1
-            if self.p['sweep.exit_when_done']:
-                self.done = True
+            s.start(k + self.lead)
+            self.get_logger().info(f'sweep started at tick {k + self.lead}')
+        s.record('measured', k, msg.position)
+        s.record('motor_speed_0', k, msg.motor_speed[0])
+        s.record('motor_speed_1', k, msg.motor_speed[1])
+        s.record('active_channel', k, msg.active_channel)
+        s.record('reference', k, s.reference_for(k))
+        self.send(k + self.lead, s.reference_for(k + self.lead), s.load_for(k + self.lead))
+        for point in s.progress(k - MARGIN_TICKS):
+            self.get_logger().info(s.describe(point))
+        if not self.done and k - s.seq0 >= s.n_run + MARGIN_TICKS:
+            self.end()
 
-        def publish_diagnostics(self):
-            s = self.session
-            values = {'started': s.seq0 is not None, 'points': len(s.points),
-                      'planned_points': len(getattr(self.plan, 'segments', [])),
-                      'finished': s.finished, 'status': s.aborted or 'running',
-                      'out_dir': self.out, **self.loop.values()}
-            diag.publish(self, self.pub_diag, 'sweep', values,
-                         diag.ERROR if s.aborted else diag.OK, s.aborted or 'ok')
+    def send(self, seq, position, load=0.0):
+        m = self.ref_msg
+        m.seq = int(seq)
+        m.position = float(position)
+        publish_counted(self, self.pub, m, f'reference {seq}')
+        if self.pub_load is not None:
+            self.load_msg.force = float(load)
+            publish_counted(self, self.pub_load, self.load_msg, f'load {seq}')
 
-        def close(self):
-            """Ctrl-C: keep every finished frequency, mark the summary incomplete."""
-            if self.session.seq0 is not None and not self.session.finished:
-                self.end(reason='interrupted')
-            elif not self.session.finished:
-                self.session.finish(complete=False, reason='interrupted before the start')
+    def end(self, reason=None):
+        """Finish the report; reference back to the offset; exit if asked to."""
+        if self.session.finished:
+            return
+        self.send(0, self.session.position)
+        summary = self.session.finish(reason=reason)
+        print_table(summary, lambda line: self.get_logger().info(line))
+        self.get_logger().info(f'report: {self.out}/ (summary.json, data.csv, '
+                               f'{"stiffness" if self.session.excite == "load" else "bode"}.png)')
+        if not summary['complete']:
+            self.exit_code = 1
+        if self.p['sweep.exit_when_done']:
+            self.done = True
 
-    return Sweep()
+    def publish_diagnostics(self):
+        s = self.session
+        values = {'started': s.seq0 is not None, 'points': len(s.points),
+                  'planned_points': len(getattr(self.plan, 'segments', [])),
+                  'finished': s.finished, 'status': s.aborted or 'running',
+                  'out_dir': self.out, **self.loop.values()}
+        diag.publish(self, self.pub_diag, 'sweep', values,
+                     diag.ERROR if s.aborted else diag.OK, s.aborted or 'ok')
+
+    def close(self):
+        """Ctrl-C: keep every finished frequency, mark the summary incomplete."""
+        if self.session.seq0 is not None and not self.session.finished:
+            self.end(reason='interrupted')
+        elif not self.session.finished:
+            self.session.finish(complete=False, reason='interrupted before the start')
+
+
+def make_node(params: dict, transport=None):
+    """The sweep on ``transport`` (None: DDS; common.bind)."""
+    return bind(Sweep, transport)(params)
 
 
 def main(argv=None) -> int:

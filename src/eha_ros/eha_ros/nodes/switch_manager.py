@@ -17,12 +17,17 @@ import time
 from collections import deque
 from itertools import islice
 
+from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, PositionEstimate,
+                          RedundancyStatus)
+from eha_msgs.srv import SwitchChannel
+
+from ..core.loop import safe_state as SAFE
 from ..core.redundancy import ChannelSample, EventLog, SwitchManager
 from ..core.redundancy.params import SCHEMA
 from ..core.loop.stats import Counters, LoopStats
 from ..core.loop.supervisor import LoopSupervisor, SupervisorParams
 from . import diag
-from .common import (declare_and_validate, latched_qos, node_base, publish_counted, run,
+from .common import (bind, declare_and_validate, latched_qos, publish_counted, run,
                      stream_qos)
 
 
@@ -33,269 +38,267 @@ def _finite(*values) -> bool:
 SUPERVISOR_CHECK = 0.02      # [s] wall-clock period of the supervisor's stall check
 
 
-def make_node(params: dict):
-    from ..core.loop import safe_state as SAFE
-    Node = node_base()
-    from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, PositionEstimate,
-                              RedundancyStatus)
-    from eha_msgs.srv import SwitchChannel
+class SwitchManagerNode:
+    """The switch manager node (rclpy base: its transport, common.bind)."""
 
-    class SwitchManagerNode(Node):
-        def __init__(self):
-            super().__init__('switch_manager')
-            self.p = p = declare_and_validate(self, SCHEMA, params)
-            self.Ts = p['plant.sim.Ts']
-            self.max_cmd_age_ticks = int(round(p['switch.health.speed.max_command_age'] /
-                                               self.Ts))
-            self.arm_ticks = int(round(p['switch.node.arm_time'] / self.Ts))
-            self.fresh_since, self.armed = None, False
-            self.mgr = SwitchManager(p)
-            self.log = EventLog(p['switch.node.log_dir'])
-            self.lock = threading.Lock()
-            self.c = Counters()
-            self.loop = LoopStats(self.Ts)
-            self.speed_ref = 0.0
-            self.cmd_seq = None
-            self.refs = deque(maxlen=256)    # (seq, speed ref) of recent commands
-            self.scan = min(256, 2 * self.max_cmd_age_ticks + 8)
-            self.innovation, self.estimate_ok = float('nan'), False
-            self.last_state_time = None
-            self.state_stale = False
-            self.last_seq = None
-            self.sent_select = None
-            self.sent_status = None
-            self.logged = 0
-            realtime = not self.get_parameter('use_sim_time').value
-            self.sup = LoopSupervisor(SupervisorParams.from_params(p, realtime))
-            self.sup_reported = None
-            self.pub_select = self.create_publisher(ChannelSelect, 'eha/channel_select',
-                                                    latched_qos())
-            self.pub_status = self.create_publisher(RedundancyStatus, 'eha/redundancy',
-                                                    latched_qos())
-            self.pub_diag = diag.publisher(self)
-            qos = stream_qos()
-            deep = stream_qos()
-            deep.depth = 200            # a starved executor catches up instead of dropping
-            self.create_subscription(ActuatorState, 'eha/state', self.on_state, deep)
-            self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
-            self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
-            self.create_service(SwitchChannel, 'eha/switch_channel', self.on_switch)
-            self.create_timer(p['switch.node.status_period'], self.on_status_timer)
-            self.create_timer(p['switch.node.diagnostics_period'], self.publish_diagnostics)
-            from rclpy.clock import Clock, ClockType
-            # wall time, also in lock-step: a stalled loop stops the simulated clock
-            self.create_timer(SUPERVISOR_CHECK, self.on_supervisor_timer,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
-            self.Select, self.Status = ChannelSelect, RedundancyStatus
-            self.flush()
-            self.get_logger().info(
-                f'switch_manager: {self.mgr.name}, valve time '
-                f'{p["plant.valves.onoff_time"] * 1e3:.0f} ms, safe mode {p["switch.safe_mode"]}, '
-                f'event log {self.log.path or "off"}')
+    def __init__(self, params: dict):
+        super().__init__('switch_manager')
+        self.p = p = declare_and_validate(self, SCHEMA, params)
+        self.Ts = p['plant.sim.Ts']
+        self.max_cmd_age_ticks = int(round(p['switch.health.speed.max_command_age'] /
+                                           self.Ts))
+        self.arm_ticks = int(round(p['switch.node.arm_time'] / self.Ts))
+        self.fresh_since, self.armed = None, False
+        self.mgr = SwitchManager(p)
+        self.log = EventLog(p['switch.node.log_dir'])
+        self.lock = threading.Lock()
+        self.c = Counters()
+        self.loop = LoopStats(self.Ts)
+        self.speed_ref = 0.0
+        self.cmd_seq = None
+        self.refs = deque(maxlen=256)    # (seq, speed ref) of recent commands
+        self.scan = min(256, 2 * self.max_cmd_age_ticks + 8)
+        self.innovation, self.estimate_ok = float('nan'), False
+        self.last_state_time = None
+        self.state_stale = False
+        self.last_seq = None
+        self.sent_select = None
+        self.sent_status = None
+        self.logged = 0
+        realtime = not self.get_parameter('use_sim_time').value
+        self.sup = LoopSupervisor(SupervisorParams.from_params(p, realtime))
+        self.sup_reported = None
+        self.pub_select = self.create_publisher(ChannelSelect, 'eha/channel_select',
+                                                latched_qos())
+        self.pub_status = self.create_publisher(RedundancyStatus, 'eha/redundancy',
+                                                latched_qos())
+        self.pub_diag = diag.publisher(self)
+        qos = stream_qos()
+        deep = stream_qos()
+        deep.depth = 200            # a starved executor catches up instead of dropping
+        self.create_subscription(ActuatorState, 'eha/state', self.on_state, deep)
+        self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
+        self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
+        self.create_service(SwitchChannel, 'eha/switch_channel', self.on_switch)
+        self.create_timer(p['switch.node.status_period'], self.on_status_timer)
+        self.create_timer(p['switch.node.diagnostics_period'], self.publish_diagnostics)
+        from rclpy.clock import Clock, ClockType
+        # wall time, also in lock-step: a stalled loop stops the simulated clock
+        self.create_timer(SUPERVISOR_CHECK, self.on_supervisor_timer,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.Select, self.Status = ChannelSelect, RedundancyStatus
+        self.flush()
+        self.get_logger().info(
+            f'switch_manager: {self.mgr.name}, valve time '
+            f'{p["plant.valves.onoff_time"] * 1e3:.0f} ms, safe mode {p["switch.safe_mode"]}, '
+            f'event log {self.log.path or "off"}')
 
-        # ---- inputs ----
-        def on_command(self, msg):
-            if not _finite(msg.motor_speed_ref):
-                self.c.bump('rejected_commands')
-                return
-            self.speed_ref = float(msg.motor_speed_ref)
-            self.cmd_seq = int(msg.seq)
-            self.refs.append((self.cmd_seq, self.speed_ref))
-            self.sup.command(self.cmd_seq, self.speed_ref, time.monotonic())
-            self.supervise()
+    # ---- inputs ----
+    def on_command(self, msg):
+        if not _finite(msg.motor_speed_ref):
+            self.c.bump('rejected_commands')
+            return
+        self.speed_ref = float(msg.motor_speed_ref)
+        self.cmd_seq = int(msg.seq)
+        self.refs.append((self.cmd_seq, self.speed_ref))
+        self.sup.command(self.cmd_seq, self.speed_ref, time.monotonic())
+        self.supervise()
 
-        def on_estimate(self, msg):
-            if not _finite(msg.innovation):
-                self.c.bump('rejected_estimates')
-                self.estimate_ok = False
-                return
-            self.innovation = float(msg.innovation)
-            self.estimate_ok = not (msg.stale or msg.update_skipped or msg.sensor_fault)
-            self.sup.estimate(int(msg.seq), msg.update_skipped and not msg.sensor_fault,
-                              msg.stale, time.monotonic())
-            self.supervise()
-            if SAFE.position_fault(msg.consistency):
-                with self.lock:
-                    entered = self.mgr.safe_state(SAFE.manager_reason(msg.consistency))
-                if entered:
-                    self.c.bump('position_faults')
-                    self.flush()                 # the lock goes out now, logged once
-
-        def on_state(self, msg):
-            self.loop.timed(self.handle_state, msg)
-
-        def handle_state(self, msg):
-            values = (msg.position, msg.pressure_a, msg.pressure_b, *msg.motor_speed,
-                      *msg.motor_current)
-            if self.last_seq is not None and msg.seq > self.last_seq + 1:
-                self.c.bump('lost_states', int(msg.seq - self.last_seq - 1))
-            self.last_seq = msg.seq
-            self.last_state_time = now = time.monotonic()
-            self.sup.state(int(msg.seq), now)      # arrived: the loop's timing counts it
-            if not _finite(*values[3:]) or not msg.valid:
-                # speeds/currents are what the monitors judge: a bad sample is not evidence
-                # (a repeated device sample is published not valid: the bridge's catch-up)
-                self.c.bump('rejected_states')
-                return
-            # the loop is closed (and the speed reference known) only while commands answer
-            # recent states (a stale command is zeroed in the plant/bridge, unseen from here)
-            fresh = self.cmd_seq is not None and \
-                msg.seq - self.cmd_seq <= self.max_cmd_age_ticks
-            if not fresh:
-                self.fresh_since = None
-            elif self.fresh_since is None:
-                self.fresh_since = msg.seq
-            if not self.armed and fresh and msg.seq - self.fresh_since >= self.arm_ticks:
-                self.armed = True               # once: the start-up transient is over
-                self.get_logger().info(f'position loop closed for '
-                                       f'{self.p["switch.node.arm_time"]:g} s: monitors armed')
-            # which command the drive applies now is not known here (DDS latency): the speed
-            # error is measured from the range of the references of the last window
-            # (commands come once per tick: the window is within the newest entries)
-            oldest = msg.seq - self.max_cmd_age_ticks
-            recent = [r for k, r in islice(reversed(self.refs), self.scan) if k >= oldest]
-            band = (min(recent), max(recent)) if recent else None
-            s = ChannelSample(msg.seq * self.Ts, self.speed_ref, tuple(msg.motor_speed),
-                              tuple(msg.motor_current), msg.pressure_a, msg.pressure_b,
-                              tuple(bool(b) for b in msg.drive_enabled),
-                              tuple(bool(b) for b in msg.drive_fault), msg.valid,
-                              self.innovation, self.estimate_ok, self.armed and fresh, band)
-            if not fresh:
-                self.c.bump('states_without_fresh_command')
+    def on_estimate(self, msg):
+        if not _finite(msg.innovation):
+            self.c.bump('rejected_estimates')
+            self.estimate_ok = False
+            return
+        self.innovation = float(msg.innovation)
+        self.estimate_ok = not (msg.stale or msg.update_skipped or msg.sensor_fault)
+        self.sup.estimate(int(msg.seq), msg.update_skipped and not msg.sensor_fault,
+                          msg.stale, time.monotonic())
+        self.supervise()
+        if SAFE.position_fault(msg.consistency):
             with self.lock:
-                self.mgr.update(s, int(msg.seq))
-            self.supervise()
-            self.flush()
+                entered = self.mgr.safe_state(SAFE.manager_reason(msg.consistency))
+            if entered:
+                self.c.bump('position_faults')
+                self.flush()                 # the lock goes out now, logged once
 
-        def on_switch(self, req, resp):
-            with self.lock:
-                was_safe = self.mgr.name == 'FAILED_SAFE'
-                ok, text = self.mgr.request(int(req.channel), req.reason)
-                if ok and was_safe and self.sup.trip is not None:
-                    self.sup.reset(time.monotonic())      # the operator left the safe state
-                    self.sup_reported = None
-            resp.success, resp.message = bool(ok), text
-            self.c.bump('switch_requests' if ok else 'switch_requests_refused')
-            self.get_logger().info(f'switch_channel {req.channel} ({req.reason!r}): {text}')
-            self.flush()
-            return resp
+    def on_state(self, msg):
+        self.loop.timed(self.handle_state, msg)
 
-        # ---- loop supervisor ----
-        def on_supervisor_timer(self):
-            self.sup.check(time.monotonic())
-            self.supervise()
+    def handle_state(self, msg):
+        values = (msg.position, msg.pressure_a, msg.pressure_b, *msg.motor_speed,
+                  *msg.motor_current)
+        if self.last_seq is not None and msg.seq > self.last_seq + 1:
+            self.c.bump('lost_states', int(msg.seq - self.last_seq - 1))
+        self.last_seq = msg.seq
+        self.last_state_time = now = time.monotonic()
+        self.sup.state(int(msg.seq), now)      # arrived: the loop's timing counts it
+        if not _finite(*values[3:]) or not msg.valid:
+            # speeds/currents are what the monitors judge: a bad sample is not evidence
+            # (a repeated device sample is published not valid: the bridge's catch-up)
+            self.c.bump('rejected_states')
+            return
+        # the loop is closed (and the speed reference known) only while commands answer
+        # recent states (a stale command is zeroed in the plant/bridge, unseen from here)
+        fresh = self.cmd_seq is not None and \
+            msg.seq - self.cmd_seq <= self.max_cmd_age_ticks
+        if not fresh:
+            self.fresh_since = None
+        elif self.fresh_since is None:
+            self.fresh_since = msg.seq
+        if not self.armed and fresh and msg.seq - self.fresh_since >= self.arm_ticks:
+            self.armed = True               # once: the start-up transient is over
+            self.get_logger().info(f'position loop closed for '
+                                   f'{self.p["switch.node.arm_time"]:g} s: monitors armed')
+        # which command the drive applies now is not known here (DDS latency): the speed
+        # error is measured from the range of the references of the last window
+        # (commands come once per tick: the window is within the newest entries)
+        oldest = msg.seq - self.max_cmd_age_ticks
+        recent = [r for k, r in islice(reversed(self.refs), self.scan) if k >= oldest]
+        band = (min(recent), max(recent)) if recent else None
+        s = ChannelSample(msg.seq * self.Ts, self.speed_ref, tuple(msg.motor_speed),
+                          tuple(msg.motor_current), msg.pressure_a, msg.pressure_b,
+                          tuple(bool(b) for b in msg.drive_enabled),
+                          tuple(bool(b) for b in msg.drive_fault), msg.valid,
+                          self.innovation, self.estimate_ok, self.armed and fresh, band)
+        if not fresh:
+            self.c.bump('states_without_fresh_command')
+        with self.lock:
+            self.mgr.update(s, int(msg.seq))
+        self.supervise()
+        self.flush()
 
-        def supervise(self):
-            """A new supervisor trip: the safe state (latched like a position fault), one ERROR
-            line, ERROR on /diagnostics at once."""
-            trip = self.sup.trip
-            if trip is None or trip is self.sup_reported:
-                return
-            self.sup_reported = trip
-            with self.lock:
-                entered = self.mgr.safe_state(f'loop supervisor: {trip.message}')
-            self.c.bump('supervisor_trips')
-            then = f'safe state {self.p["switch.safe_mode"]}' if entered else \
-                'already in the safe state'
-            self.get_logger().error(f'loop supervisor ({trip.kind}): {trip.message}; {then}')
-            self.flush()
-            self.publish_supervisor()
+    def on_switch(self, req, resp):
+        with self.lock:
+            was_safe = self.mgr.name == 'FAILED_SAFE'
+            ok, text = self.mgr.request(int(req.channel), req.reason)
+            if ok and was_safe and self.sup.trip is not None:
+                self.sup.reset(time.monotonic())      # the operator left the safe state
+                self.sup_reported = None
+        resp.success, resp.message = bool(ok), text
+        self.c.bump('switch_requests' if ok else 'switch_requests_refused')
+        self.get_logger().info(f'switch_channel {req.channel} ({req.reason!r}): {text}')
+        self.flush()
+        return resp
 
-        @diag.reader
-        def publish_supervisor(self):
-            trip = self.sup.trip
-            values = dict(self.sup.values(), seq=trip.seq if trip else self.last_seq or 0)
-            diag.publish(self, self.pub_diag, 'supervisor', values,
-                         diag.ERROR if trip else diag.OK,
-                         f'{trip.kind}: {trip.message}' if trip else 'ok')
+    # ---- loop supervisor ----
+    def on_supervisor_timer(self):
+        self.sup.check(time.monotonic())
+        self.supervise()
 
-        # ---- outputs ----
-        def flush(self):
-            """Publish select/status when they changed; append new events to the log."""
-            with self.lock:
-                sel = self.mgr.select
-                status = (sel.channel, tuple(self.mgr.channel_healthy), self.mgr.switch_count,
-                          self.mgr.name, self.mgr.reason)
-                events = self.mgr.events[self.logged:]
-                self.logged = len(self.mgr.events)
-                seq = self.mgr.seq
-            if sel != self.sent_select:
-                m = self.Select()
-                m.header.stamp = self.get_clock().now().to_msg()
-                m.seq = int(seq)
-                m.channel = int(sel.channel)
-                m.drive_enable = [bool(b) for b in sel.drive_enable]
-                m.valve_open = [bool(b) for b in sel.valve_open]
-                m.bypass_open = bool(sel.bypass_open)
-                publish_counted(self, self.pub_select, m, f'channel_select {seq}')
-                self.sent_select = sel
-            if status != self.sent_status:
-                self.publish_status(status, seq)
-            for ev in events:
-                try:
-                    self.log.append(ev)
-                except OSError as err:
-                    self.c.bump('log_errors')
-                    self.get_logger().error(f'switch-event log {self.log.path}: {err.strerror}',
-                                            throttle_duration_sec=5.0)
-                text = (f'{ev.kind} at t={ev.t:.3f} s (seq {ev.seq}): {ev.from_state} -> '
-                        f'{ev.to_state}: {ev.reason}')
-                if ev.kind in ('switch_start', 'safe', 'degraded', 'refused'):
-                    self.get_logger().warning(text)      # one call site per severity (rclpy)
-                else:
-                    self.get_logger().info(text)
-                if ev.kind == 'safe':
-                    self.publish_diagnostics()
+    def supervise(self):
+        """A new supervisor trip: the safe state (latched like a position fault), one ERROR
+        line, ERROR on /diagnostics at once."""
+        trip = self.sup.trip
+        if trip is None or trip is self.sup_reported:
+            return
+        self.sup_reported = trip
+        with self.lock:
+            entered = self.mgr.safe_state(f'loop supervisor: {trip.message}')
+        self.c.bump('supervisor_trips')
+        then = f'safe state {self.p["switch.safe_mode"]}' if entered else \
+            'already in the safe state'
+        self.get_logger().error(f'loop supervisor ({trip.kind}): {trip.message}; {then}')
+        self.flush()
+        self.publish_supervisor()
 
-        def publish_status(self, status, seq):
-            m = self.Status()
+    @diag.reader
+    def publish_supervisor(self):
+        trip = self.sup.trip
+        values = dict(self.sup.values(), seq=trip.seq if trip else self.last_seq or 0)
+        diag.publish(self, self.pub_diag, 'supervisor', values,
+                     diag.ERROR if trip else diag.OK,
+                     f'{trip.kind}: {trip.message}' if trip else 'ok')
+
+    # ---- outputs ----
+    def flush(self):
+        """Publish select/status when they changed; append new events to the log."""
+        with self.lock:
+            sel = self.mgr.select
+            status = (sel.channel, tuple(self.mgr.channel_healthy), self.mgr.switch_count,
+                      self.mgr.name, self.mgr.reason)
+            events = self.mgr.events[self.logged:]
+            self.logged = len(self.mgr.events)
+            seq = self.mgr.seq
+        if sel != self.sent_select:
+            m = self.Select()
             m.header.stamp = self.get_clock().now().to_msg()
             m.seq = int(seq)
-            m.active_channel, healthy, m.switch_count, m.state, m.reason = status
-            m.channel_healthy = [bool(b) for b in healthy]
-            publish_counted(self, self.pub_status, m, f'redundancy status {seq}')
-            self.sent_status = status
-
-        def on_status_timer(self):
-            with self.lock:
-                status = (self.mgr.select.channel, tuple(self.mgr.channel_healthy),
-                          self.mgr.switch_count, self.mgr.name, self.mgr.reason)
-                seq = self.mgr.seq
+            m.channel = int(sel.channel)
+            m.drive_enable = [bool(b) for b in sel.drive_enable]
+            m.valve_open = [bool(b) for b in sel.valve_open]
+            m.bypass_open = bool(sel.bypass_open)
+            publish_counted(self, self.pub_select, m, f'channel_select {seq}')
+            self.sent_select = sel
+        if status != self.sent_status:
             self.publish_status(status, seq)
-            t = self.last_state_time
-            stale = t is not None and time.monotonic() - t > self.p['switch.node.state_timeout']
-            if stale and not self.state_stale:
-                self.c.bump('state_timeouts')
-                self.get_logger().warning('no /eha/state: health is not being monitored')
-            self.state_stale = stale
-
-        @diag.reader
-        def publish_diagnostics(self):
-            with self.lock:
-                mgr = self.mgr
-                values = {'state': mgr.name, 'active_channel': mgr.active,
-                          'switch_count': mgr.switch_count, 'reason': mgr.reason,
-                          'healthy_A': mgr.channel_healthy[0],
-                          'healthy_B': mgr.channel_healthy[1],
-                          'why_A': mgr.health.why(0), 'why_B': mgr.health.why(1),
-                          'pressure_plausible': mgr.health.pressure_plausible,
-                          'state_stale': self.state_stale, 'armed': self.armed,
-                          'events': len(mgr.events),
-                          'last_event': mgr.events[-1].line() if mgr.events else ''}
-                name, reason = mgr.name, mgr.reason
-            values.update(self.c)
-            values.update(self.loop.values())
-            if name == 'FAILED_SAFE':
-                level, text = diag.ERROR, reason      # why; safe state <switch.safe_mode>
-            elif name == 'DEGRADED' or self.state_stale:
-                level, text = diag.WARN, ('no redundancy left' if name == 'DEGRADED'
-                                          else 'no /eha/state')
+        for ev in events:
+            try:
+                self.log.append(ev)
+            except OSError as err:
+                self.c.bump('log_errors')
+                self.get_logger().error(f'switch-event log {self.log.path}: {err.strerror}',
+                                        throttle_duration_sec=5.0)
+            text = (f'{ev.kind} at t={ev.t:.3f} s (seq {ev.seq}): {ev.from_state} -> '
+                    f'{ev.to_state}: {ev.reason}')
+            if ev.kind in ('switch_start', 'safe', 'degraded', 'refused'):
+                self.get_logger().warning(text)      # one call site per severity (rclpy)
             else:
-                level, text = diag.OK, name
-            diag.publish(self, self.pub_diag, 'redundancy', values, level, text)
-            self.publish_supervisor()
+                self.get_logger().info(text)
+            if ev.kind == 'safe':
+                self.publish_diagnostics()
 
-    return SwitchManagerNode()
+    def publish_status(self, status, seq):
+        m = self.Status()
+        m.header.stamp = self.get_clock().now().to_msg()
+        m.seq = int(seq)
+        m.active_channel, healthy, m.switch_count, m.state, m.reason = status
+        m.channel_healthy = [bool(b) for b in healthy]
+        publish_counted(self, self.pub_status, m, f'redundancy status {seq}')
+        self.sent_status = status
+
+    def on_status_timer(self):
+        with self.lock:
+            status = (self.mgr.select.channel, tuple(self.mgr.channel_healthy),
+                      self.mgr.switch_count, self.mgr.name, self.mgr.reason)
+            seq = self.mgr.seq
+        self.publish_status(status, seq)
+        t = self.last_state_time
+        stale = t is not None and time.monotonic() - t > self.p['switch.node.state_timeout']
+        if stale and not self.state_stale:
+            self.c.bump('state_timeouts')
+            self.get_logger().warning('no /eha/state: health is not being monitored')
+        self.state_stale = stale
+
+    @diag.reader
+    def publish_diagnostics(self):
+        with self.lock:
+            mgr = self.mgr
+            values = {'state': mgr.name, 'active_channel': mgr.active,
+                      'switch_count': mgr.switch_count, 'reason': mgr.reason,
+                      'healthy_A': mgr.channel_healthy[0],
+                      'healthy_B': mgr.channel_healthy[1],
+                      'why_A': mgr.health.why(0), 'why_B': mgr.health.why(1),
+                      'pressure_plausible': mgr.health.pressure_plausible,
+                      'state_stale': self.state_stale, 'armed': self.armed,
+                      'events': len(mgr.events),
+                      'last_event': mgr.events[-1].line() if mgr.events else ''}
+            name, reason = mgr.name, mgr.reason
+        values.update(self.c)
+        values.update(self.loop.values())
+        if name == 'FAILED_SAFE':
+            level, text = diag.ERROR, reason      # why; safe state <switch.safe_mode>
+        elif name == 'DEGRADED' or self.state_stale:
+            level, text = diag.WARN, ('no redundancy left' if name == 'DEGRADED'
+                                      else 'no /eha/state')
+        else:
+            level, text = diag.OK, name
+        diag.publish(self, self.pub_diag, 'redundancy', values, level, text)
+        self.publish_supervisor()
+
+
+def make_node(params: dict, transport=None):
+    """The switch manager on ``transport`` (None: DDS; common.bind)."""
+    return bind(SwitchManagerNode, transport)(params)
 
 
 def main(argv=None) -> int:

@@ -74,34 +74,38 @@ def build(args):
         raise UsageError(f'cannot listen on {host}:{port}: {err.strerror}') from None
 
 
+class PeerNode:
+    """A small node: /eha/inject_fault and /eha/sim/load_force into the peer's plant (rclpy
+    base: nodes.common.bind)."""
+
+    def __init__(self, peer):
+        from eha_msgs.msg import ExternalLoad
+        from eha_msgs.srv import InjectFault
+        from ..nodes.common import stream_qos
+        super().__init__('ads_peer')
+        self.peer = peer
+        self.create_service(InjectFault, 'eha/inject_fault', self.on_fault)
+        self.create_subscription(ExternalLoad, 'eha/sim/load_force', self.on_load,
+                                 stream_qos())
+
+    def on_fault(self, req, resp):
+        ok, text, tick = self.peer.inject_fault(req.fault, int(req.channel), req.magnitude,
+                                                req.duration)
+        resp.success, resp.message = bool(ok), f'{text} (tick {tick})' if ok else text
+        self.get_logger().info(f'inject_fault {req.fault}: {text}')
+        return resp
+
+    def on_load(self, msg):
+        import math
+        if math.isfinite(msg.force):
+            self.peer.set_load(msg.force)
+
+
 def ros_side(peer):
-    """A small node: /eha/inject_fault and /eha/sim/load_force into the peer's plant."""
+    """rclpy and the peer's node (PeerNode over DDS)."""
     import rclpy
-    from eha_msgs.msg import ExternalLoad
-    from eha_msgs.srv import InjectFault
-    from ..nodes.common import node_base, stream_qos
-    Node = node_base()
-
-    class PeerNode(Node):
-        def __init__(self):
-            super().__init__('ads_peer')
-            self.create_service(InjectFault, 'eha/inject_fault', self.on_fault)
-            self.create_subscription(ExternalLoad, 'eha/sim/load_force', self.on_load,
-                                     stream_qos())
-
-        def on_fault(self, req, resp):
-            ok, text, tick = peer.inject_fault(req.fault, int(req.channel), req.magnitude,
-                                               req.duration)
-            resp.success, resp.message = bool(ok), f'{text} (tick {tick})' if ok else text
-            self.get_logger().info(f'inject_fault {req.fault}: {text}')
-            return resp
-
-        def on_load(self, msg):
-            import math
-            if math.isfinite(msg.force):
-                peer.set_load(msg.force)
-
-    return rclpy, PeerNode()
+    from ..nodes.common import bind
+    return rclpy, bind(PeerNode)(peer)
 
 
 def main(argv=None) -> int:
