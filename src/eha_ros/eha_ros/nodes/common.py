@@ -171,12 +171,6 @@ def _bound(cls, transport):
                 {'transport': transport, '__module__': cls.__module__})
 
 
-def node_kwargs() -> dict:
-    """Keyword arguments for rclpy Node so params-file keys show up as overrides."""
-    return dict(automatically_declare_parameters_from_overrides=False,
-                allow_undeclared_parameters=False)
-
-
 PLANT_STATE_TOPIC = 'eha/plant_state'
 
 
