@@ -91,6 +91,35 @@ def test_reproducible_noise_with_seed():
     assert xa == xb and xa != xc
 
 
+def test_reset_and_new_noise_blocks_write_into_the_kernels_record():
+    """The compiled step's arrays (EhaPlant.arrays, one record) are made with the plant: new
+    noise blocks and reset() write into them, none can be replaced, and a plant reset after
+    more than two noise blocks and a fault repeats a fresh one bit for bit."""
+    from eha_ros.core.plant.sensors import BLOCK
+    a, fresh = make_plant(seed=3), make_plant(seed=3)
+    record = a.arrays
+    arrays = [id(x) for x in record]
+
+    def run(plant, n):
+        out = []
+        for k in range(n):
+            plant.step(300.0 * math.sin(0.004 * k), 5e3 * math.sin(0.002 * k))
+            out.append((plant.S.copy(), plant.arrays.meas.copy(), plant.t))
+        return out
+
+    run(a, 2 * BLOCK + 300)
+    assert a.inject_fault('msp_bias', 0, 1e-3, 0.0)[0]
+    a.reset(0.01)
+    fresh.reset(0.01)
+    assert a.arrays is record and [id(x) for x in a.arrays] == arrays
+    assert a._noise.block is record.block and a._delay.ring is record.ring
+    with pytest.raises(AttributeError):
+        a.S = a.S.copy()
+    for got, want in zip(run(a, BLOCK + 10), run(fresh, BLOCK + 10)):
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+        assert got[2] == want[2]
+
+
 def test_oil_is_conserved():
     """Chamber oil + accumulator oil is constant (closed circuit, eq. 3.19 and 3.18)."""
     from eha_ros.core.plant import layout as L

@@ -142,11 +142,11 @@ def run(args=None) -> dict:
 
 # ---------------------------------------------------------------------- per component
 @njit(cache=True)
-def _plant(S, P, U, T, nsub, block, meas, aux, ring, table, u, f):
+def _plant(a, nsub, u, f):
     for k in range(u.shape[0]):
-        if PS.noise_exhausted(aux):
-            aux[PS.A_NOISE_K] = 0            # timing only: reuse the block
-        PS.step(S, P, U, T, nsub, block, meas, aux, ring, table, u[k], f[k])
+        if PS.noise_exhausted(a):
+            a.aux[PS.A_NOISE_K] = 0          # timing only: reuse the block
+        PS.step(a, nsub, u[k], f[k])
 
 
 def components(rec, refs, loads, repeats: int = 3) -> dict:
@@ -158,14 +158,11 @@ def components(rec, refs, loads, repeats: int = 3) -> dict:
     n = rc.shape[1]
     w_act = np.where(rc[R_CHANNEL] > 0.5, rc[R_WM + 1], rc[R_WM])
     plant = loop.plant
-    aux, ring, table = PS.pack(plant)
     ek, ee, ea = loop.est.kernel
     ck, cc, ca = CS.pack(loop.ctl)
     mgr = RS.pack(loop.mgr)
     jobs = {
-        'plant': lambda: _plant(plant.S, plant._P, plant.U, plant._T, plant._nsub,
-                                plant._noise.block, plant._meas, aux, ring, table, rc[R_U],
-                                np.ascontiguousarray(loads)),
+        'plant': lambda: _plant(plant.arrays, plant._nsub, rc[R_U], np.ascontiguousarray(loads)),
         'estimator': lambda: _estimator(ek, ee, ea, rc[R_XM], w_act, rc[R_PM], rc[R_PM + 1]),
         'controller': lambda: _controller(ck, cc, ca, np.ascontiguousarray(refs), rc[R_XHAT],
                                           w_act),

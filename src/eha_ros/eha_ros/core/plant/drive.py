@@ -106,6 +106,11 @@ class SpeedDelay:
         """head: a one-element array for the ring index (the plant's aux vector); its own
         when not given."""
         self.ticks = ticks
-        self.ring = np.zeros(max(ticks, 1))
+        self.ring = np.empty(max(ticks, 1))
         self.head = head if head is not None else np.zeros(1)
+        self.clear()
+
+    def clear(self) -> None:
+        """Empty FIFO (zeros) in the same ring (the plant's kernel record holds it)."""
+        self.ring[:] = 0.0
         self.head[0] = 0.0

@@ -1,128 +1,35 @@
-"""Index layout of the flat arrays shared by the compiled kernels.
+"""Index layout of the flat arrays shared by the compiled kernels: an index is its name's place
+in its group's tuple (unpacked from the range of the group's length, which checks the count).
 
-P_*: parameter vector (parameters.pack); S_*: state; C_*: offsets in a channel block
-(channel c starts at S_CH + c * NCH); U_*: per-tick inputs incl. fault effects; M_*: measurement.
+P_*: parameter vector (each entry's value: parameters.PACKED); S_*: state; C_*: offsets in a
+channel block (channel c starts at S_CH + c * NCH); U_*: per-tick inputs incl. fault effects;
+M_*: measurement.
 """
 
-P_H = 0
-P_THETA = 1
-P_NEWTON_N = 2
-P_NEWTON_TOL = 3
-P_DRIVE_EVERY = 4
-P_BETA = 5
-P_AP = 6
-P_VD = 7
-P_MP = 8
-P_CC = 9
-P_XSTOP = 10
-P_KSTOP = 11
-P_CSTOP = 12
-P_FRIC = 13
-P_FC = 14
-P_FS = 15
-P_VS = 16
-P_MU = 17
-P_DP = 18
-P_CP = 19
-P_CR = 20
-P_LEAK_TABLE = 21
-P_DQ = 22
-P_R = 23
-P_L = 24
-P_KT = 25
-P_KE = 26
-P_J = 27
-P_BEQ = 28
-P_NP = 29
-P_LD = 30
-P_LQ = 31
-P_LAMBDA = 32
-P_TD = 33
-P_KPI = 34
-P_KII = 35
-P_KPW = 36
-P_KIW = 37
-P_LPW = 38
-P_VMAX = 39
-P_IMAX = 40
-P_WMAX = 41
-P_EXP_RL = 42
-P_EXP_LP = 43
-P_ACC_V0 = 44
-P_ACC_P0 = 45
-P_PATM = 46
-P_CHECK_K = 47
-P_CHECK_CRACK = 48
-P_RELIEF_CRACK = 49
-P_RELIEF_K = 50
-P_ONOFF_RATE = 51
-P_BYPASS_RATE = 52
-P_BYPASS_K = 53
-P_X_SIGMA = 54
-P_GM_SIGMA = 55
-P_GM_A = 56
-P_X_RES = 57
-P_W_SIGMA = 58
-P_I_SIGMA = 59
-P_PR_SIGMA = 60
-P_NOISE_ON = 61
-P_THETA_STIFF = 62
-P_VALVE_BAND = 63
 NPAR = 64
+(P_H, P_THETA, P_NEWTON_N, P_NEWTON_TOL, P_DRIVE_EVERY,
+ P_BETA, P_AP, P_VD, P_MP, P_CC, P_XSTOP, P_KSTOP, P_CSTOP,
+ P_FRIC, P_FC, P_FS, P_VS, P_MU,
+ P_DP, P_CP, P_CR, P_LEAK_TABLE,
+ P_DQ, P_R, P_L, P_KT, P_KE, P_J, P_BEQ, P_NP, P_LD, P_LQ, P_LAMBDA,
+ P_TD, P_KPI, P_KII, P_KPW, P_KIW, P_LPW, P_VMAX, P_IMAX, P_WMAX, P_EXP_RL, P_EXP_LP,
+ P_ACC_V0, P_ACC_P0, P_PATM,
+ P_CHECK_K, P_CHECK_CRACK, P_RELIEF_CRACK, P_RELIEF_K, P_ONOFF_RATE, P_BYPASS_RATE, P_BYPASS_K,
+ P_X_SIGMA, P_GM_SIGMA, P_GM_A, P_X_RES, P_W_SIGMA, P_I_SIGMA, P_PR_SIGMA, P_NOISE_ON,
+ P_THETA_STIFF, P_VALVE_BAND) = range(NPAR)
 
-S_X = 0
-S_V = 1
-S_PA = 2
-S_PB = 3
-S_VOIL = 4
-S_PACC = 5
-S_FF = 6
-S_FB = 7
-S_QREL = 8
-S_GM = 9
-S_NIT = 10  # Newton iterations, running count (diagnostic)
-S_DPA = 11  # last sub-step increments: Newton predictor
-S_DPB = 12
-S_DV = 13
-S_CH = 14
-C_W = 0
-C_I = 1
-C_ID = 2
-C_IIQ = 3
-C_IID = 4
-C_IW = 5
-C_IF = 6
-C_FV = 7
-C_VQ = 8
-C_VD = 9
-C_TQ = 10
+S_CH = 14       # the scalar states, then the channel blocks
+(S_X, S_V, S_PA, S_PB, S_VOIL, S_PACC, S_FF, S_FB, S_QREL, S_GM,
+ S_NIT,                  # Newton iterations, running count (diagnostic)
+ S_DPA, S_DPB, S_DV) = range(S_CH)     # last sub-step increments: Newton predictor
 NCH = 11
+(C_W, C_I, C_ID, C_IIQ, C_IID, C_IW, C_IF, C_FV, C_VQ, C_VD, C_TQ) = range(NCH)
 NSTATE = S_CH + 2 * NCH
 
-U_WREF = 0
-U_FL = 1
-U_EN0 = 2
-U_EN1 = 3
-U_VT0 = 4
-U_VT1 = 5
-U_BT = 6
-U_FAIL0 = 7
-U_FAIL1 = 8
-U_LEAK0 = 9
-U_LEAK1 = 10
-U_FX_SIGMA = 11
-U_FX_BIAS = 12
-U_FX_STUCK = 13
-U_FP_BIAS = 14
-U_FP_STUCK = 15
 NIN = 16
+(U_WREF, U_FL, U_EN0, U_EN1, U_VT0, U_VT1, U_BT, U_FAIL0, U_FAIL1, U_LEAK0, U_LEAK1,
+ U_FX_SIGMA, U_FX_BIAS, U_FX_STUCK, U_FP_BIAS, U_FP_STUCK) = range(NIN)
 
-M_X = 0
-M_W0 = 1
-M_W1 = 2
-M_I0 = 3
-M_I1 = 4
-M_PA = 5
-M_PB = 6
 NM = 7
+(M_X, M_W0, M_W1, M_I0, M_I1, M_PA, M_PB) = range(NM)
 NNOISE = 9  # normal draws per tick

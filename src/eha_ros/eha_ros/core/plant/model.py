@@ -1,7 +1,8 @@
 """Nonlinear dual-redundant single-piston EHA plant (ch. 3, Fig. 3.12), one call per 1 ms tick.
 
-The heavy lifting is in compiled kernels (:mod:`.integrator`, :mod:`.sensors`); this class
-holds the state arrays, the drive delay FIFO, channel selection, faults and the API.
+The heavy lifting is in compiled kernels (:mod:`.integrator`, :mod:`.sensors`, one tick:
+:func:`.stepper.step`); this class holds their arrays (one record, made once), the drive delay
+FIFO, channel selection, faults and the API.
 """
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..kernel_records import entry_point
 from . import layout as L
 from . import sensors as SN
 from . import stepper as PS
@@ -58,10 +60,10 @@ def _aux_flag(index: int, doc: str) -> property:
     """A bool attribute kept in the plant's aux vector (1.0 / 0.0), where the compiled step
     reads and writes it."""
     def get(self) -> bool:
-        return bool(self._aux[index] > 0.5)
+        return bool(self.arrays.aux[index] > 0.5)
 
     def put(self, value: bool) -> None:
-        self._aux[index] = 1.0 if value else 0.0
+        self.arrays.aux[index] = 1.0 if value else 0.0
     return property(get, put, doc=doc)
 
 
@@ -76,14 +78,19 @@ class EhaPlant:
     def __init__(self, params: dict, seed: int = 0):
         self.p = PlantParams.from_dict(params)
         self.Ts = self.p.Ts
-        self._P = pack(self.p)
         self._nsub = self.p.substeps
-        self._T = leakage_table(self.p)
-        self._seed = seed
         # the scalars the compiled step advances (stepper.A_*): time, noise row, flags, the
         # delay ring's head, the fault count; read through the properties below
-        self._aux = np.zeros(PS.NAUX)
-        self.faults = FaultSet(self.p.stroke, self._aux[PS.A_NFAULT:PS.A_NFAULT + 1])
+        aux = np.zeros(PS.NAUX)
+        self.faults = FaultSet(self.p.stroke, aux[PS.A_NFAULT:PS.A_NFAULT + 1])
+        self._delay = SpeedDelay(self.p.delay_ticks, aux[PS.A_HEAD:PS.A_HEAD + 1])
+        self._noise = SN.NoiseSource(seed, aux[PS.A_NOISE_K:PS.A_NOISE_K + 1])
+        # the compiled step's arrays, made once: reset() and a new noise block write into them
+        self.arrays = PS.Arrays(np.zeros(L.NSTATE), pack(self.p), np.zeros(L.NIN),
+                                leakage_table(self.p), self._noise.block, np.zeros(L.NM), aux,
+                                self._delay.ring, self.faults.table)
+        # called per tick without typing the record again (kernel_records.entry_point)
+        self._step = entry_point(PS.step, self.arrays, self._nsub, 0.0, 0.0)
         self.reset()
 
     # ------------------------------------------------------------------ set-up
@@ -92,36 +99,51 @@ class EhaPlant:
         active (drive 0 enabled, valves 0 open), channel 1 standby; faults cleared."""
         if not math.isfinite(position) or abs(position) > self.p.x_stop:
             raise ValueError(f'reset position {position!r} m: expected within +-{self.p.x_stop}')
-        p = self.p
-        self._aux[:] = 0.0
-        self._aux[PS.A_TS] = self.Ts
-        self.S = np.zeros(L.NSTATE)
-        self.S[L.S_X] = position
-        self.S[L.S_PACC] = p.acc_p_init
-        self.S[L.S_VOIL] = oil_volume(p.acc_p_init, p.acc_V_0, p.acc_P_0, p.p_atm)
-        self.S[L.S_PA] = self.S[L.S_PB] = p.acc_p_init
-        self.U = np.zeros(L.NIN)
-        self.U[L.U_LEAK0] = self.U[L.U_LEAK1] = 1.0
-        self.active_channel = 0
+        p, a = self.p, self.arrays
+        a.aux[:] = 0.0
+        a.aux[PS.A_TS] = self.Ts
+        S = a.S
+        S[:] = 0.0
+        S[L.S_X] = position
+        S[L.S_PACC] = p.acc_p_init
+        S[L.S_VOIL] = oil_volume(p.acc_p_init, p.acc_V_0, p.acc_P_0, p.p_atm)
+        S[L.S_PA] = S[L.S_PB] = p.acc_p_init
+        a.U[:] = 0.0
+        a.U[L.U_LEAK0] = a.U[L.U_LEAK1] = 1.0
         self.select(0, (True, False), (True, False), False)
-        self.S[L.S_CH + L.C_FV] = 1.0           # valves 0 already open at start
-        self._delay = SpeedDelay(p.delay_ticks, self._aux[PS.A_HEAD:PS.A_HEAD + 1])
-        self._aux[PS.A_NDELAY] = p.delay_ticks
-        self._noise = SN.NoiseSource(self._seed, self._aux[PS.A_NOISE_K:PS.A_NOISE_K + 1])
-        self._meas = np.zeros(L.NM)
+        S[L.S_CH + L.C_FV] = 1.0                # valves 0 already open at start
+        self._delay.clear()
+        a.aux[PS.A_NDELAY] = p.delay_ticks
+        self._noise.restart()
+        a.meas[:] = 0.0
         self._valid = True
         self.faults.clear()
         self._faulted = False
         self._sample()
 
     @property
+    def S(self) -> np.ndarray:
+        """State vector (layout.S_*)."""
+        return self.arrays.S
+
+    @property
+    def U(self) -> np.ndarray:
+        """Inputs of the tick and fault effects (layout.U_*)."""
+        return self.arrays.U
+
+    @property
     def t(self) -> float:
         """Plant time (s): ticks stepped times Ts."""
-        return float(self._aux[PS.A_T])
+        return float(self.arrays.aux[PS.A_T])
 
     @t.setter
     def t(self, value: float) -> None:
-        self._aux[PS.A_T] = value
+        self.arrays.aux[PS.A_T] = value
+
+    @property
+    def active_channel(self) -> int:
+        """Channel selected as active (:meth:`select`)."""
+        return int(self.arrays.aux[PS.A_ACTIVE])
 
     _valid = _aux_flag(PS.A_VALID, 'Every tick so far finite (a non-finite one is undone and '
                                    'marks the state).')
@@ -134,7 +156,7 @@ class EhaPlant:
         targets; valves move over their opening time."""
         if channel not in (0, 1):
             raise ValueError(f'channel {channel!r}: expected 0 or 1')
-        self.active_channel = int(channel)
+        self.arrays.aux[PS.A_ACTIVE] = channel
         for c in range(2):
             self.U[L.U_EN0 + c] = 1.0 if drive_enable[c] else 0.0
             self.U[L.U_VT0 + c] = 1.0 if valve_open[c] else 0.0
@@ -158,8 +180,7 @@ class EhaPlant:
         self._noise.refill()
         # stepper.step: the drive delay, the fault effects, this tick's noise row, the tick
         # (a non-finite one is undone and marks the state not valid), t += Ts
-        PS.step(self.S, self._P, self.U, self._T, self._nsub, self._noise.block, self._meas,
-                self._aux, self._delay.ring, faults.table, omega_ref, load_force)
+        self._step(self.arrays, self._nsub, omega_ref, load_force)
 
     def run(self, omega_ref, load_force=None) -> np.ndarray:
         """Batch helper: step through arrays of inputs; returns the true positions."""
@@ -172,12 +193,12 @@ class EhaPlant:
         return out
 
     def _sample(self):
-        SN.sample(self.S, self._P, self.U, self._noise.block[self._noise.next_index()],
-                  self._meas)
+        a = self.arrays
+        SN.sample(a.S, a.P, a.U, a.block[self._noise.next_index()], a.meas)
 
     # ------------------------------------------------------------------ outputs
     def measure(self) -> Measurement:
-        m = self._meas
+        m = self.arrays.meas
         fail = self.U[[L.U_FAIL0, L.U_FAIL1]] > 0.5
         return Measurement(
             t=self.t, position=float(m[L.M_X]),

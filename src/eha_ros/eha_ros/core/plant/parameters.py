@@ -5,7 +5,8 @@ Every ``plant.*`` parameter is declared here with type, SI unit, physical range 
 must state it);
 ``config/plant.yaml`` repeats them with their thesis source. :class:`PlantParams` is the
 validated, typed view that the model and the linear models use, and :func:`pack` turns it into
-the flat float64 vector the compiled kernels read (indices in :mod:`.layout`).
+the flat float64 vector the compiled kernels read (indices in :mod:`.layout`, each one's
+attribute in :data:`PACKED`).
 
 Decided choices (thesis inconsistencies, see DESIGN.md):
 - beta = 1.379e9 Pa (Table 3.8; Table 4.5's 1.379e7 is a typo, D.1 uses 1.355e9).
@@ -217,6 +218,56 @@ class PlantParams(_Fields):
     def delay_ticks(self) -> int:
         return int(round(self.delay / self.Ts))
 
+    @property
+    def h(self) -> float:
+        """Integration sub-step (s)."""
+        return self.Ts / self.substeps
+
+    @property
+    def drive_every(self) -> int:
+        """Sub-steps per drive sample."""
+        return self.substeps // self.drive_ratio
+
+    @property
+    def friction_code(self) -> int:
+        """friction_model as friction.friction's ``model``: 0 none, 1 viscous, 2 Stribeck."""
+        return {'none': 0, 'viscous': 1, 'stribeck': 2}[self.friction_model]
+
+    @property
+    def leakage_tabulated(self) -> bool:
+        """Pump leakage from the eta_v map (:func:`leakage_table`), not C_p and C_r."""
+        return self.leakage_model == 'table'
+
+    @property
+    def dq(self) -> bool:
+        """d-q motor model (eq. 3.10-3.12), not the DC one."""
+        return self.motor_model == 'dq'
+
+    @property
+    def current_pole(self) -> float:
+        """exp(-R h / L): the motor current's decay over a sub-step."""
+        return math.exp(-self.R * self.h / self.L)
+
+    @property
+    def lowpass_pole(self) -> float:
+        """exp(-lowpass_w drive_period): the speed loop's low-pass over a drive sample."""
+        return math.exp(-self.lowpass_w * self.drive_period)
+
+    @property
+    def onoff_rate(self) -> float:
+        """On-off valve opening fraction per sub-step (1: at once)."""
+        return self.h / self.onoff_time if self.onoff_time > 0 else 1.0
+
+    @property
+    def bypass_rate(self) -> float:
+        """Bypass valve opening fraction per sub-step (1: at once)."""
+        return self.h / self.bypass_time if self.bypass_time > 0 else 1.0
+
+    @property
+    def position_gm_pole(self) -> float:
+        """exp(-2 pi f_c Ts): the position sensor's Gauss-Markov pole per tick."""
+        return math.exp(-2.0 * math.pi * self.position_gm_corner * self.Ts)
+
     @classmethod
     def from_dict(cls, values: dict) -> 'PlantParams':
         """Build from ``load(PLANT_SCHEMA, files)``: validated again (defaults filled, the
@@ -227,41 +278,35 @@ class PlantParams(_Fields):
                       else v[spec.name] for spec in PLANT_SCHEMA.params})
 
 
+# the parameter vector the compiled kernels read: each layout.P_* index and the PlantParams
+# attribute that gives its value, in index order
+PACKED = {
+    L.P_H: 'h', L.P_THETA: 'theta', L.P_NEWTON_N: 'newton_max_iter',
+    L.P_NEWTON_TOL: 'newton_tol', L.P_DRIVE_EVERY: 'drive_every',
+    L.P_BETA: 'beta', L.P_AP: 'A_p', L.P_VD: 'V_d', L.P_MP: 'm_p', L.P_CC: 'C_c',
+    L.P_XSTOP: 'x_stop', L.P_KSTOP: 'stop_k', L.P_CSTOP: 'stop_c',
+    L.P_FRIC: 'friction_code', L.P_FC: 'F_c', L.P_FS: 'F_s', L.P_VS: 'v_s', L.P_MU: 'mu',
+    L.P_DP: 'D_p', L.P_CP: 'C_p', L.P_CR: 'C_r', L.P_LEAK_TABLE: 'leakage_tabulated',
+    L.P_DQ: 'dq', L.P_R: 'R', L.P_L: 'L', L.P_KT: 'k_T', L.P_KE: 'k_E', L.P_J: 'J_eq',
+    L.P_BEQ: 'b_eq', L.P_NP: 'n_p', L.P_LD: 'L_d', L.P_LQ: 'L_q', L.P_LAMBDA: 'lambda_m',
+    L.P_TD: 'drive_period', L.P_KPI: 'Kp_i', L.P_KII: 'Ki_i', L.P_KPW: 'Kp_w',
+    L.P_KIW: 'Ki_w', L.P_LPW: 'lowpass_w', L.P_VMAX: 'V_max', L.P_IMAX: 'I_max',
+    L.P_WMAX: 'omega_max', L.P_EXP_RL: 'current_pole', L.P_EXP_LP: 'lowpass_pole',
+    L.P_ACC_V0: 'acc_V_0', L.P_ACC_P0: 'acc_P_0', L.P_PATM: 'p_atm',
+    L.P_CHECK_K: 'check_K', L.P_CHECK_CRACK: 'check_crack',
+    L.P_RELIEF_CRACK: 'relief_crack', L.P_RELIEF_K: 'relief_K',
+    L.P_ONOFF_RATE: 'onoff_rate', L.P_BYPASS_RATE: 'bypass_rate', L.P_BYPASS_K: 'bypass_K',
+    L.P_X_SIGMA: 'position_sigma', L.P_GM_SIGMA: 'position_gm_sigma',
+    L.P_GM_A: 'position_gm_pole', L.P_X_RES: 'position_resolution',
+    L.P_W_SIGMA: 'speed_sigma', L.P_I_SIGMA: 'current_sigma', L.P_PR_SIGMA: 'pressure_sigma',
+    L.P_NOISE_ON: 'sensor_noise', L.P_THETA_STIFF: 'theta_stiff', L.P_VALVE_BAND: 'band',
+}
+assert sorted(PACKED) == list(range(L.NPAR)), 'PACKED: one entry per layout.P_* index'
+
+
 def pack(p: PlantParams) -> np.ndarray:
-    """Flat float64 parameter vector for the compiled kernels (indices in layout)."""
-    v = np.zeros(L.NPAR)
-    h = p.Ts / p.substeps
-    fric = {'none': 0, 'viscous': 1, 'stribeck': 2}[p.friction_model]
-    vals = {
-        L.P_H: h, L.P_THETA: p.theta, L.P_THETA_STIFF: p.theta_stiff, L.P_NEWTON_N: p.newton_max_iter,
-        L.P_NEWTON_TOL: p.newton_tol, L.P_DRIVE_EVERY: p.substeps // p.drive_ratio,
-        L.P_BETA: p.beta, L.P_AP: p.A_p, L.P_VD: p.V_d, L.P_MP: p.m_p, L.P_CC: p.C_c,
-        L.P_XSTOP: p.x_stop, L.P_KSTOP: p.stop_k, L.P_CSTOP: p.stop_c,
-        L.P_FRIC: fric, L.P_FC: p.F_c, L.P_FS: p.F_s, L.P_VS: p.v_s, L.P_MU: p.mu,
-        L.P_DP: p.D_p, L.P_CP: p.C_p, L.P_CR: p.C_r,
-        L.P_LEAK_TABLE: 1.0 if p.leakage_model == 'table' else 0.0,
-        L.P_DQ: 1.0 if p.motor_model == 'dq' else 0.0,
-        L.P_R: p.R, L.P_L: p.L, L.P_KT: p.k_T, L.P_KE: p.k_E, L.P_J: p.J_eq, L.P_BEQ: p.b_eq,
-        L.P_NP: p.n_p, L.P_LD: p.L_d, L.P_LQ: p.L_q, L.P_LAMBDA: p.lambda_m,
-        L.P_TD: p.drive_period, L.P_KPI: p.Kp_i, L.P_KII: p.Ki_i, L.P_KPW: p.Kp_w,
-        L.P_KIW: p.Ki_w, L.P_LPW: p.lowpass_w, L.P_VMAX: p.V_max, L.P_IMAX: p.I_max,
-        L.P_WMAX: p.omega_max,
-        L.P_ACC_V0: p.acc_V_0, L.P_ACC_P0: p.acc_P_0, L.P_PATM: p.p_atm,
-        L.P_CHECK_K: p.check_K, L.P_CHECK_CRACK: p.check_crack,
-        L.P_RELIEF_CRACK: p.relief_crack, L.P_RELIEF_K: p.relief_K,
-        L.P_ONOFF_RATE: h / p.onoff_time if p.onoff_time > 0 else 1.0,
-        L.P_BYPASS_RATE: h / p.bypass_time if p.bypass_time > 0 else 1.0,
-        L.P_BYPASS_K: p.bypass_K, L.P_VALVE_BAND: p.band,
-        L.P_EXP_RL: math.exp(-p.R * h / p.L), L.P_EXP_LP: math.exp(-p.lowpass_w * p.drive_period),
-        L.P_X_SIGMA: p.position_sigma, L.P_GM_SIGMA: p.position_gm_sigma,
-        L.P_GM_A: math.exp(-2.0 * math.pi * p.position_gm_corner * p.Ts),
-        L.P_X_RES: p.position_resolution, L.P_W_SIGMA: p.speed_sigma,
-        L.P_I_SIGMA: p.current_sigma, L.P_PR_SIGMA: p.pressure_sigma,
-        L.P_NOISE_ON: 1.0 if p.sensor_noise else 0.0,
-    }
-    for k, val in vals.items():
-        v[k] = float(val)
-    return v
+    """Flat float64 parameter vector for the compiled kernels (:data:`PACKED`)."""
+    return np.array([float(getattr(p, PACKED[i])) for i in range(L.NPAR)])
 
 
 def leakage_table(p: PlantParams) -> np.ndarray:

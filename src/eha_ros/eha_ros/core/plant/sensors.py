@@ -40,13 +40,23 @@ def sample(S, P, U, n, out):
 
 class NoiseSource:
     """Seeded normal draws (numpy Generator) in blocks of BLOCK ticks: reproducible runs.
-    ``counter``: a one-element array that holds the rows used (the plant's aux vector, which
-    the compiled step advances); its own when not given."""
+    ``block`` is one array for the source's life: each new block is drawn into it (the plant's
+    kernel record holds it). ``counter``: a one-element array that holds the rows used (the
+    plant's aux vector, which the compiled step advances); its own when not given."""
 
     def __init__(self, seed: int, counter=None):
-        self.rng = np.random.default_rng(seed)
-        self.block = self.rng.standard_normal((BLOCK, L.NNOISE))
+        self.seed = seed
+        self.block = np.empty((BLOCK, L.NNOISE))
         self._k = counter if counter is not None else np.zeros(1)
+        self.restart()
+
+    def restart(self) -> None:
+        """Back to the seed's first block."""
+        self.rng = np.random.default_rng(self.seed)
+        self._draw()
+
+    def _draw(self) -> None:
+        self.rng.standard_normal(out=self.block)
         self._k[0] = 0.0
 
     @property
@@ -57,8 +67,7 @@ class NoiseSource:
     def refill(self) -> None:
         """A new block when this one is used up (before a tick takes its row)."""
         if self._k[0] >= BLOCK:
-            self.block = self.rng.standard_normal((BLOCK, L.NNOISE))
-            self._k[0] = 0.0
+            self._draw()
 
     def next_index(self) -> int:
         """Row of ``self.block`` to use for this tick (draws a new block when used up)."""

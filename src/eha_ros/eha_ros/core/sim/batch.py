@@ -252,29 +252,24 @@ class BatchLoop:
         """Compiled ticks k .. stop-1 until one needs Python; returns that tick (or stop)."""
         from . import closed_loop as CL
         from ..controller import stepper as CS
-        from ..plant import stepper as PS
         from ..redundancy import stepper as RS
         from ..kernel_records import placeholder
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
-        aux, ring, table = PS.pack(plant)
         est_kernel = est.kernel if est is not None else _dummy_estimator()
         ctl_kernel = CS.pack(ctl)
         mgr_arrays = RS.pack(mgr) if mgr is not None else placeholder(RS.Arrays)
         u = self.u
-        noise = plant._noise
         while True:
-            pl = (plant.S, plant._P, plant.U, plant._T, noise.block, plant._meas, aux, ring,
-                  table)
             k0 = k
-            k, why, u = CL.segment(k, stop, off, self.Ts, refs, loads, pl, plant._nsub,
-                                   est_kernel, est is not None,
+            k, why, u = CL.segment(k, stop, off, self.Ts, refs, loads, plant.arrays,
+                                   plant._nsub, est_kernel, est is not None,
                                    ctl_kernel, mgr_arrays, mgr is not None,
                                    u, rec)
             self.segments += 1
             self.fast_ticks += k - k0
             if why != CL.NOISE:
                 break
-            noise.refill()                    # the block is used up: the next one
+            plant._noise.refill()             # the block is used up: the next one
         self.u = float(u)
         CS.unpack(ctl, ctl.s)
         if mgr is not None:

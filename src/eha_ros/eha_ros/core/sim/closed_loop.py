@@ -88,12 +88,12 @@ def state_code(g) -> int:
 def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, has_mgr, u,
             rec):
     """Ticks k0 .. k1-1 with refs[k - off], loads[k - off] into rec[k - off]; u is the
-    previous command (rad/s).
+    previous command (rad/s); ``plant``: the plant's plant.stepper.Arrays, nsub its sub-steps.
 
     Returns (k, why, u): k the first tick not done (k1 at END), why END / EVENT (tick k is
     Python's) / NOISE (draw the next noise block, call again), u the last command.
     """
-    S, P, U, T, block, meas, aux, ring, table = plant
+    S, U, meas, aux = plant.S, plant.U, plant.meas, plant.aux
     ek, ee, ea = est                    # estimator stepper: constants, state, Arrays
     ck, cc, ca = ctl                    # controller stepper: constants, state, Arrays
     x, Pe, Q, Fx, Gx = ea.x, ea.P, ea.Q, ca.Fx, ca.Gx
@@ -108,7 +108,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
     cmd = np.zeros(2, np.bool_)
     age = np.zeros(2)
     for k in range(k0, k1):
-        if PS.noise_exhausted(aux):
+        if PS.noise_exhausted(plant):
             return k, NOISE, u
         ref = refs[k - off]
         load = loads[k - off]
@@ -116,7 +116,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         ch = int(aux[PS.A_ACTIVE])
         pa = meas[L.M_PA]
         pb = meas[L.M_PB]
-        if (PS.fault_due(aux, table) or not math.isfinite(load) or not CS.ready(cc, ref)
+        if (PS.fault_due(plant) or not math.isfinite(load) or not CS.ready(cc, ref)
                 or (has_est and not ES.ready(ek, ee, pos, meas[L.M_W0 + ch], pa, pb))):
             return k, EVENT, u
         _copy(x, keep[0]); _copy(Pe, keep[1]); _copy(ee, keep[2]); _copy(cc, keep[3])  # noqa
@@ -149,7 +149,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
             _copy(keep[4], Fx); _copy(keep[5], Gx); _copy(keep[6], ms); _copy(keep[7], hs)  # noqa
             _copy(keep[8], g); _copy(keep[9], Q)  # noqa
             return k, EVENT, u
-        PS.step(S, P, U, T, nsub, block, meas, aux, ring, table, un, load)
+        PS.step(plant, nsub, un, load)
         u = un
         r = rec[k - off]
         r[R_T] = aux[PS.A_T]
