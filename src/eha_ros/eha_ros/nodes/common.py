@@ -165,6 +165,13 @@ def bind(cls, transport=None):
     return _bound(cls, transport or dds_transport())
 
 
+def factory(cls) -> Callable:
+    """The ``make_node(params, transport=None)`` of a node class: the node on its transport."""
+    def make_node(params: dict, transport=None):
+        return bind(cls, transport)(params)
+    return make_node
+
+
 @functools.cache
 def _bound(cls, transport):
     return type(cls.__name__, (cls, transport),

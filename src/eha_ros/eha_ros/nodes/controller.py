@@ -32,7 +32,7 @@ from ..core.loop.stats import Counters, LoopStats
 from ..core.redundancy.state_machine import FAILED_SAFE
 from . import diag
 from .managed import autostart, state_label, transition
-from .common import (PLANT_STATE_TOPIC, bind, clock_s, declare_and_validate, latched_qos,
+from .common import (PLANT_STATE_TOPIC, clock_s, declare_and_validate, factory, latched_qos,
                      publish_counted, run, stream_qos)
 
 
@@ -307,9 +307,7 @@ class Controller(LifecycleNodeMixin):
                 f'inactive: plant side {self.plant_state}')
 
 
-def make_node(params: dict, transport=None):
-    """The controller on ``transport`` (None: DDS; common.bind)."""
-    return bind(Controller, transport)(params)
+make_node = factory(Controller)     # make_node(params, transport=None)
 
 
 def main(argv=None) -> int:

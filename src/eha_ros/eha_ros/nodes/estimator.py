@@ -19,7 +19,7 @@ from ..core.estimator.fault_detector import NAMES
 from ..core.estimator.params import SCHEMA
 from ..core.loop.stats import Counters, LoopStats
 from . import diag
-from .common import bind, clock_s, declare_and_validate, publish_counted, run, stream_qos
+from .common import clock_s, declare_and_validate, factory, publish_counted, run, stream_qos
 
 STATE_QUEUE_DEPTH = 20      # states (20 ms at 1 kHz): rides out short stalls without a long backlog
 
@@ -188,9 +188,7 @@ class EstimatorNode:
         diag.publish(self, self.pub_diag, f'filter {self.get_namespace()}', values, level, msg)
 
 
-def make_node(params: dict, transport=None):
-    """The estimator on ``transport`` (None: DDS; common.bind)."""
-    return bind(EstimatorNode, transport)(params)
+make_node = factory(EstimatorNode)     # make_node(params, transport=None)
 
 
 def main(argv=None) -> int:

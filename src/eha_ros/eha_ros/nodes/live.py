@@ -36,7 +36,7 @@ from ..core.config.params import ParamError
 from ..core.io.ws_subprotocol import SubprotocolRelay
 from . import diag, msgdefs
 from .compose import unlocked
-from .common import bind, declare_and_validate, run
+from .common import declare_and_validate, factory, run
 from .tap import TopicTap
 
 
@@ -404,9 +404,7 @@ class Live:
             pass
 
 
-def make_node(params: dict, transport=None):
-    """The live view on ``transport`` (None: DDS; common.bind)."""
-    return bind(Live, transport)(params)
+make_node = factory(Live)     # make_node(params, transport=None)
 
 
 def main(argv=None) -> int:

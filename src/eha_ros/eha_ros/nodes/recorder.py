@@ -16,7 +16,7 @@ import time
 from ..core.io.mcap_sink import McapSink
 from ..core.io.recorder_params import SCHEMA
 from . import diag
-from .common import bind, declare_and_validate, run
+from .common import declare_and_validate, factory, run
 from .tap import TopicTap, qos_yaml
 
 
@@ -99,9 +99,7 @@ class Recorder:
             pass
 
 
-def make_node(params: dict, transport=None):
-    """The recorder on ``transport`` (None: DDS; common.bind)."""
-    return bind(Recorder, transport)(params)
+make_node = factory(Recorder)     # make_node(params, transport=None)
 
 
 def main(argv=None) -> int:

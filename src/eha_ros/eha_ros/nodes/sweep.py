@@ -28,8 +28,8 @@ from ..core.sweep.params import SCHEMA, build_plan
 from ..core.loop.stats import LoopStats
 from ..core.sweep.session import from_params, print_table
 from . import diag
-from .common import (PLANT_STATE_TOPIC, bind, declare_and_validate, latched_qos,
-                     publish_counted, run, stream_qos)
+from .common import (PLANT_STATE_TOPIC, declare_and_validate, factory, latched_qos, publish_counted,
+                     run, stream_qos)
 
 MARGIN_TICKS = 30           # data of a tick is complete this many ticks after its state
 
@@ -176,9 +176,7 @@ class Sweep:
             self.session.finish(complete=False, reason='interrupted before the start')
 
 
-def make_node(params: dict, transport=None):
-    """The sweep on ``transport`` (None: DDS; common.bind)."""
-    return bind(Sweep, transport)(params)
+make_node = factory(Sweep)     # make_node(params, transport=None)
 
 
 def main(argv=None) -> int:

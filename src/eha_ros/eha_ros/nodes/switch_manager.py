@@ -27,8 +27,7 @@ from ..core.redundancy.params import SCHEMA
 from ..core.loop.stats import Counters, LoopStats
 from ..core.loop.supervisor import LoopSupervisor, SupervisorParams
 from . import diag
-from .common import (bind, declare_and_validate, latched_qos, publish_counted, run,
-                     stream_qos)
+from .common import declare_and_validate, factory, latched_qos, publish_counted, run, stream_qos
 
 
 def _finite(*values) -> bool:
@@ -296,9 +295,7 @@ class SwitchManagerNode:
         self.publish_supervisor()
 
 
-def make_node(params: dict, transport=None):
-    """The switch manager on ``transport`` (None: DDS; common.bind)."""
-    return bind(SwitchManagerNode, transport)(params)
+make_node = factory(SwitchManagerNode)     # make_node(params, transport=None)
 
 
 def main(argv=None) -> int:

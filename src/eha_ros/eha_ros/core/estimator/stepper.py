@@ -181,8 +181,8 @@ def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
 
 def predict_filter(kf, chambers: bool, omega: float, p_D: float | None,
                    w_friction: float | None) -> None:
-    """ModelKF / ChamberKF (``chambers``).predict, a filter on its own: :func:`predict_tick` with the speed
-    held at ``omega`` over the period, the friction's speed ``w_friction`` (default omega) and
+    """ModelKF / ChamberKF (``chambers``).predict, a filter on its own: :func:`predict_tick`
+    with the speed held at ``omega`` over the period, the friction's speed ``w_friction`` (default omega) and
     the measured ``p_D`` (None: the filter's own) as given, not filtered. The filter's
     constants and arrays are packed once (kf._alone); its state (check-valve mode, pressure
     increments, friction model) is passed in and taken back on each call."""
