@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
-from ..kernel_records import Matrix, Vector
+from ..kernel_records import Matrix, Vector, entry_point
 from . import adapt
 from . import fault_detector as fd
 from . import noise_level
@@ -188,15 +188,16 @@ def predict_filter(kf, chambers: bool, omega: float, p_D: float | None,
     increments, friction model) is passed in and taken back on each call."""
     if getattr(kf, '_alone', None) is None:
         k, e = np.zeros(NK), np.zeros(NE)
-        kf._alone = k, e, pack_filter(kf, k, e, True, chambers)   # K_ALPHA_WF 0: as given
-    k, e, a = kf._alone
+        a = pack_filter(kf, k, e, True, chambers)       # K_ALPHA_WF 0: w_friction as given
+        kf._alone = k, e, a, entry_point(predict_tick, k, e, a, 0.0)
+    k, e, a, predict = kf._alone
     if chambers:
         e[E_PLAST:E_PLAST + 4], e[E_FS:E_FS + adapt.NFS] = kf.p_last, kf.fs
     e[E_OMEGA] = omega                       # the period's mean speed: (omega + omega) / 2
     e[E_WFRIC] = omega if w_friction is None else w_friction
     k[K_USE_P] = p_D is not None
     e[E_PD_FILT] = 0.0 if p_D is None else p_D
-    predict_tick(k, e, a, omega)
+    predict(k, e, a, float(omega))
     if chambers:
         kf.p_last[:], kf.fs[:] = e[E_PLAST:E_PLAST + 4], e[E_FS:E_FS + adapt.NFS]
         kf.mode = int(e[E_MODE])
