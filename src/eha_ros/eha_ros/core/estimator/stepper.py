@@ -181,26 +181,33 @@ def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
 
 def predict_filter(kf, chambers: bool, omega: float, p_D: float | None,
                    w_friction: float | None) -> None:
-    """ModelKF / ChamberKF (``chambers``).predict, a filter on its own: :func:`predict_tick`
-    with the speed held at ``omega`` over the period, the friction's speed ``w_friction`` (default omega) and
-    the measured ``p_D`` (None: the filter's own) as given, not filtered. The filter's
-    constants and arrays are packed once (kf._alone); its state (check-valve mode, pressure
-    increments, friction model) is passed in and taken back on each call."""
+    """ModelKF / ChamberKF (``chambers``).predict, a filter on its own: :func:`predict_given`.
+    The filter's constants and arrays are packed once (kf._alone); its state (check-valve
+    mode, pressure increments, friction model) is passed in and taken back on each call."""
     if getattr(kf, '_alone', None) is None:
         k, e = np.zeros(NK), np.zeros(NE)
         a = pack_filter(kf, k, e, True, chambers)       # K_ALPHA_WF 0: w_friction as given
-        kf._alone = k, e, a, entry_point(predict_tick, k, e, a, 0.0)
+        kf._alone = k, e, a, entry_point(predict_given, k, e, a, 0.0, 0.0, True, 0.0)
     k, e, a, predict = kf._alone
     if chambers:
         e[E_PLAST:E_PLAST + 4], e[E_FS:E_FS + adapt.NFS] = kf.p_last, kf.fs
-    e[E_OMEGA] = omega                       # the period's mean speed: (omega + omega) / 2
-    e[E_WFRIC] = omega if w_friction is None else w_friction
-    k[K_USE_P] = p_D is not None
-    e[E_PD_FILT] = 0.0 if p_D is None else p_D
-    predict(k, e, a, float(omega))
+    predict(k, e, a, float(omega), float(omega if w_friction is None else w_friction),
+            p_D is not None, 0.0 if p_D is None else float(p_D))
     if chambers:
         kf.p_last[:], kf.fs[:] = e[E_PLAST:E_PLAST + 4], e[E_FS:E_FS + adapt.NFS]
         kf.mode = int(e[E_MODE])
+
+
+@njit(cache=True)
+def predict_given(k, e, a, omega, w_friction, use_p, p_D) -> None:
+    """:func:`predict_tick` with the inputs the estimator filters given as they are: the speed
+    held at ``omega`` over the period, the friction's speed ``w_friction``, the measured
+    ``p_D`` (``use_p`` False: the filter's own)."""
+    e[E_OMEGA] = omega                  # the period's mean speed: (omega + omega) / 2
+    e[E_WFRIC] = w_friction
+    k[K_USE_P] = use_p
+    e[E_PD_FILT] = p_D
+    predict_tick(k, e, a, omega)
 
 
 @njit(cache=True)
