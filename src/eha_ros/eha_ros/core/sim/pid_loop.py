@@ -108,7 +108,9 @@ def estimator_loop(params: dict, reference, duration: float, seed: int = 1,
     """The Table 3.8 PID on the estimate (BatchLoop with the estimator) for ``duration`` s,
     sample k taken after the plant's k-th tick (the first with zero command);
     ``reference(t)`` (m) or an array per tick; ``faults`` are (time_s, name, magnitude)
-    injected into the plant's sensors at that time (they show from the next sample)."""
+    injected into the plant's sensors at that time (they show from the next sample). A
+    consistency verdict that calls for the safe state (core.loop.safe_state) holds the command
+    at zero, as the stack's controller does."""
     plant = EhaPlant(params, seed=seed)
     est = estimator or Estimator(params)
     n = int(round(duration / plant.Ts))
