@@ -198,30 +198,32 @@ class EhaPlant:
 
     # ------------------------------------------------------------------ outputs
     def measure(self) -> Measurement:
-        m = self.arrays.meas
-        fail = self.U[[L.U_FAIL0, L.U_FAIL1]] > 0.5
+        a = self.arrays
+        m, U = a.meas, a.U
         return Measurement(
-            t=self.t, position=float(m[L.M_X]),
+            t=float(a.aux[PS.A_T]), position=float(m[L.M_X]),
             motor_speed=m[[L.M_W0, L.M_W1]].copy(),
             motor_current=m[[L.M_I0, L.M_I1]].copy(),
             pressure_a=float(m[L.M_PA]), pressure_b=float(m[L.M_PB]),
-            active_channel=self.active_channel,
+            active_channel=int(a.aux[PS.A_ACTIVE]),
             valve_open=self._channel(L.C_FV),
-            drive_enabled=self.U[[L.U_EN0, L.U_EN1]] > 0.5,
-            drive_fault=fail, valid=self._valid)
+            drive_enabled=U[[L.U_EN0, L.U_EN1]] > 0.5,
+            drive_fault=U[[L.U_FAIL0, L.U_FAIL1]] > 0.5, valid=self._valid)
 
     def truth(self) -> Truth:
-        S = self.S
+        a = self.arrays
+        S = a.S
         return Truth(
-            t=self.t, position=float(S[L.S_X]), velocity=float(S[L.S_V]),
+            t=float(a.aux[PS.A_T]), position=float(S[L.S_X]), velocity=float(S[L.S_V]),
             pressure_a=float(S[L.S_PA]), pressure_b=float(S[L.S_PB]),
             pressure_acc=float(S[L.S_PACC]), motor_speed=self._channel(L.C_W),
             motor_current=self._channel(L.C_I), friction_force=float(S[L.S_FF]),
-            load_force=float(self.U[L.U_FL]), valve_fraction=self._channel(L.C_FV),
+            load_force=float(a.U[L.U_FL]), valve_fraction=self._channel(L.C_FV),
             bypass_fraction=float(S[L.S_FB]))
 
     def _channel(self, offset):
-        return np.array([self.S[L.S_CH + offset], self.S[L.S_CH + L.NCH + offset]])
+        S = self.arrays.S
+        return np.array([S[L.S_CH + offset], S[L.S_CH + L.NCH + offset]])
 
     @property
     def position(self) -> float:
