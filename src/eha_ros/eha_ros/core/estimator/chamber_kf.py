@@ -291,10 +291,6 @@ class ChamberKF(MeasuredKF):
         return self.edge
 
     @property
-    def adaptive(self) -> bool:
-        return self.i_lam >= 0 or self.i_del >= 0 or self.i_kap >= 0
-
-    @property
     def external_leakage_correction(self) -> float:
         """Estimated relative correction epsilon of the per-port leakage C_r (0 without)."""
         return float(self.x[self.i_eps]) if self.i_eps >= 0 else 0.0

@@ -12,16 +12,16 @@ Corrections to the printed eq. 4.35 (stated here because they change the filter)
 - Row 2 is printed with -A_p/m_p p_D; that makes a saddle (an unstable model). The sign is +,
   as in eq. 3.23/3.24: the load pressure pushes the piston towards +x.
 - F_L enters as +F_L/m_p: a force along +x. Eq. 4.36 gives it as the friction estimate
-  F_L = -sign(xdot) min(|p_D A_p|, F_s) (F_s = 800 N), i.e. a force opposing the motion.
-  How it is evaluated (choices, see :func:`.friction.friction_estimate`): sign(xdot) is taken
-  from the measured motor speed (the estimator passes its 50 Hz low-pass,
-  model.friction_lowpass, so speed-command chatter does not flip it), saturated over a small pump-flow band v_eps (the
-  pump drives the piston, xdot ~ D_p omega / A_p, eq. 3.22 at steady state), and p_D, if
-  used, is the measured load pressure (estimator.model.friction_pressure; otherwise
-  |F_L| = F_s while moving). Evaluating it from the filter's own xdot and p_D states, held
-  over Ts, is an explicit feedback A_p p_D[k-1] across the ~760 Hz hydraulic mode and made
-  the discrete model chatter (tried: the estimate's error was 3x the raw sensor's); a hard
-  sign kicked the p_D state at every reversal.
+  F_L = -sign(xdot) min(|p_D A_p|, F_s) (F_s = 800 N), i.e. a force opposing the motion. How it
+  is evaluated (choices, see :func:`.friction.friction_estimate`): sign(xdot) is taken from the
+  measured motor speed (the estimator passes its 50 Hz low-pass, model.friction_lowpass, so
+  speed-command chatter does not flip it), saturated over a small pump-flow band v_eps (the pump
+  drives the piston, xdot ~ D_p omega / A_p, eq. 3.22 at steady state), and p_D, if used, is the
+  measured load pressure (estimator.model.friction_pressure; otherwise |F_L| = F_s while
+  moving). Evaluating it from the filter's own xdot and p_D states, held over Ts, is an explicit
+  feedback A_p p_D[k-1] across the ~760 Hz hydraulic mode and made the discrete model chatter
+  (tried: the estimate's error was 3x the raw sensor's); a hard sign kicked the p_D state at
+  every reversal.
 - The p_D leakage coefficient k_L: eq. 3.22 derives 2 C_eq beta/V_d (k_L = 2), eq. 4.35
   prints C_eq beta/V_d (k_L = 1). The nonlinear plant follows eq. 3.22 (checked with C_r = 0),
   so k_L = 2 is the default (YAML estimator.model.pd_leakage: eq3_22 | eq4_35 | boost, the
