@@ -209,6 +209,80 @@ def test_judge_and_excess():
     assert SC.excess({'a': 2.0, 'b': 2.0, 'c': 0, 'lin': 1}, specs) == (pytest.approx(1.0), 'a')
 
 
+def test_spec_cases_pick_the_first_whose_column_is_true(tmp_path):
+    """The stiffness bound of issue 42 (decision 4): 49 kN/mm where the loaded leakage stays in
+    Table 4.5, 0.9 x the linear loop at the loaded leakage beyond it."""
+    spec = SC.load('stiffness').specs['stiffness_kn_per_mm_7hz']
+    inside = {'loaded_in_table': True, 'lin_loaded_stiffness_kn_per_mm_7hz': 37.2}
+    beyond = dict(inside, loaded_in_table=False)
+    assert SC.limit(spec, inside) == ('min', 49.0)
+    assert SC.limit(spec, beyond) == ('min', pytest.approx(0.9 * 37.2))
+    specs = {'stiffness_kn_per_mm_7hz': spec}
+    assert SC.judge(dict(inside, stiffness_kn_per_mm_7hz=40.0), specs)[0] is False
+    assert SC.judge(dict(beyond, stiffness_kn_per_mm_7hz=40.0), specs) == (True, '')
+    assert SC.judge(dict(beyond, stiffness_kn_per_mm_7hz=33.0), specs)[0] is False
+    assert SC.excess(dict(beyond, stiffness_kn_per_mm_7hz=33.48), specs)[0] == \
+        pytest.approx(1 - 33.48 / 33.48, abs=1e-3)
+    from eha_ros.core.sim.report import requirement
+    assert requirement('stiffness_kn_per_mm_7hz', spec) == \
+        'where loaded_in_table: >= 49 kN/mm; else >= 0.9 x lin_loaded_stiffness_kn_per_mm_7hz'
+    p = tmp_path / 's.yaml'
+    for bad in ('[{where: a, min: 1}]',                       # no default case last
+                '[{min: 1}, {where: a, min: 2}]',             # the default not last
+                '[{where: a, min: 1, max: 2}, {min: 1}]',     # two forms in a case
+                '[]', '{min_rel: {to: x, factr: 1}}', '{where: a, min: 1}'):
+        p.write_text(f'kind: stiffness\nspecs: {{stiffness_kn_per_mm_1hz: {bad}}}\n')
+        with pytest.raises(UsageError, match='specs.stiffness_kn_per_mm_1hz'):
+            SC.load(str(p))
+
+
+def test_each_run_draws_its_own_noise():
+    """Issue 42, decision 1: a run's noise comes from (campaign seed, run id); the same plant
+    twice in one campaign sees two realizations, the same pair reproduces one."""
+    seeds = [C.noise_seed(101, i) for i in range(270)]
+    assert len(set(seeds)) == 270 and C.noise_seed(101, 5) == seeds[5]
+    assert not set(seeds) & {C.noise_seed(102, i) for i in range(270)}
+    nom = C.nominal_params()
+    one = {c: 1.0 for c in F.COLUMNS}
+    scn = SC.load('step')
+    scn.params.update(duration=0.8, steady=[0.4, 0.7])
+    a, ta = SC.run(scn, nom, one, seeds[0])
+    b, tb = SC.run(scn, nom, one, seeds[1])
+    c, tc = SC.run(scn, nom, one, seeds[0])
+    assert not np.array_equal(ta['measured'], tb['measured'])
+    np.testing.assert_array_equal(ta['measured'], tc['measured'])
+    assert a == c
+
+
+def test_load_step_steady_error_is_against_the_sensor_without_its_white_noise():
+    """Decision 2: the steady error is |mean(truth + Gauss-Markov offset)| over the window, the
+    truth's own beside it. With the white noise and the resolution off the measured position IS
+    truth + offset, so the record's offset column (R_GM, both batch paths) is checked exactly."""
+    from eha_ros.core.sim.batch import BatchLoop
+    from eha_ros.core.sim.closed_loop import R_GM, R_X0, R_XM
+    nom = C.nominal_params()
+    one = {c: 1.0 for c in F.COLUMNS}
+    plant = F.plant_params(nom['plant_sim'], one)
+    plant.update({'plant.sensors.position_sigma': 0.0, 'plant.sensors.position_resolution': 0.0})
+    n = 600
+    recs = []
+    for fast in (True, False):
+        loop = SC.build_loop(nom, plant, 7)
+        recs.append(loop.run(np.zeros(n), np.r_[np.zeros(100), np.full(n - 100, 5e3)],
+                             fast=fast))
+    np.testing.assert_array_equal(recs[0], recs[1])
+    rec = recs[0]
+    np.testing.assert_allclose(rec[:, R_XM], rec[:, R_X0] + rec[:, R_GM], rtol=0, atol=1e-15)
+    assert 5e-6 < np.std(rec[:, R_GM]) < 60e-6              # the 20 um Gauss-Markov offset
+    t = np.arange(1000) * 1e-3
+    x = np.full(1000, 3e-6)
+    gm = np.where(t >= 0.5, 25e-6, -40e-6)
+    sig = dict(t=t, truth=x, sensor_lf=x + gm, estimate=np.zeros(1000))
+    f = SC.load_step_figures(sig, dict(t_step=0.1, steady=[0.5, 0.8]), 1e-3)
+    assert f['steady_error_m'] == pytest.approx(28e-6)
+    assert f['steady_error_truth_m'] == pytest.approx(3e-6)
+
+
 # --------------------------------------------------------------------------- engine
 def test_chunks_are_guided_and_cover_every_run():
     ids = list(range(270))
@@ -343,6 +417,50 @@ def test_cli_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, why
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and why in lines[0] and lines[0].startswith('campaign: error:')
     assert not out.exists()
+
+
+def test_cli_runs_scenarios_on_seeds_as_a_set(tmp_path):
+    """Several scenarios on --seeds: one campaign folder each, summary.md / .json with the runs
+    passed per seed and the worst seed, seed roles (101-105 held out); the same command again
+    keeps what is finished."""
+    fam = tmp_path / 'f.csv'
+    write_family_csv(fam, {c: np.array([1.0, 1.0, 10.0]) if c == 'C_eq' else np.ones(3)
+                           for c in F.NAMES})
+    scns = []
+    for name, kind, params, specs in (
+            ('short_step', 'step', {'duration': 0.8, 'steady': [0.4, 0.7]},
+             {'overshoot_pct': {'max': 5.0}}),
+            ('short_load', 'load_step', {'duration': 1.2, 't_step': 0.2, 'steady': [0.6, 1.0]},
+             {'peak_deviation_m': {'max': 1e-4}})):     # fails at least on C_eq x10
+        p = tmp_path / f'{name}.yaml'
+        p.write_text(yaml.safe_dump({'name': name, 'kind': kind, 'params': params,
+                                     'specs': specs}))
+        scns.append(str(p))
+    out = tmp_path / 'set'
+    args = scns + ['--family', str(fam), '--seeds', '101-102', '--out', str(out),
+                   '--workers', '1', '--no-report', '--quiet']
+    r = cli(*args)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['seeds'] == [101, 102] and set(summary['roles'].values()) == {'held-out'}
+    s = summary['scenarios']
+    assert s['short_step']['per_seed']['101']['runs'] == 3
+    load = s['short_load']
+    assert not load['all_passed'] and load['worst_passed'] <= 2
+    assert all(f['plant']['C_eq'] == 10.0 for f in load['failures'] if f['run_id'] == 2)
+    noise = [pd.read_parquet(out / f'short_step-seed{seed}' / 'results.parquet')['noise_seed']
+             for seed in (101, 102)]
+    assert noise[0].nunique() == 3 and not set(noise[0]) & set(noise[1])
+    info = json.loads((out / 'short_step-seed101' / 'campaign.json').read_text())
+    assert info['seed_role'] == 'held-out' and info['complete']
+    md = (out / 'summary.md').read_text()
+    assert '| short_load | 3 |' in md and 'seed 101' in md, md
+    again = cli(*args)
+    assert again.returncode == 0 and again.stderr.count('done before, kept') == 4, again.stderr
+    for bad, why in ((['--seeds', 'x1'], '--seeds'), (['--seeds', '1', '--seed', '2'], 'not both')):
+        r = cli(scns[0], *bad, '--out', str(tmp_path / 'bad'), timeout=120)
+        assert r.returncode == 2 and why in r.stderr and len(r.stderr.strip().splitlines()) == 1
+        assert not (tmp_path / 'bad').exists()
 
 
 def test_cli_malformed_family_file(tmp_path):

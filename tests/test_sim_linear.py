@@ -150,3 +150,39 @@ def test_thesis_velocity_controller_shape():
     Gv, _, _ = linear.controllers(plant, linear.default_controller())
     w = np.logspace(0, 4, 7)
     assert np.allclose(Gv.freq(w), lti.thesis_velocity(plant['plant.motor.k_T']).freq(w))
+
+
+def test_the_loaded_chamber_loses_its_whole_external_leakage():
+    """core.sim.linear.operating_leakage against the nonlinear plant (noise off, viscous
+    friction) held at x = 0 by the Table 3.8 PID on the truth: the pump flow D_p omega per
+    pressure difference is eq. 3.22's C_p + C_c + C_r/2 under a light load (both chambers above
+    the check valves) and C_p + C_c + C_r once the unloaded chamber sits on its check valve
+    (issue 42, decision 3): measured as the slope between 3 and 5 kN, either sign."""
+    from eha_ros.core.config.params import load
+    from eha_ros.core.plant.parameters import PLANT_SCHEMA, plant_file
+    from eha_ros.core.sim import pid_loop as PL
+    ov = {'plant.sensors.noise': False, 'plant.friction.model': 'viscous'}
+    params = load(PLANT_SCHEMA, [plant_file()], ov)
+
+    def held(force):
+        pl = PL.make_plant(ov)
+        r = PL.plant_loop(pl, 3.0, lambda t: 0.0, lambda t: force)
+        win = r['t'] > 2.5
+        return (np.mean(r['p_a'][win] - r['p_b'][win]),
+                pl.p.D_p * np.mean(r['w'][0][win]), pl.p)
+
+    dp, q, p = held(100.0)
+    assert q / dp == pytest.approx(p.C_eq, rel=0.01)
+    assert linear.operating_leakage(params, 100.0) == p.C_eq
+    for sign in (1.0, -1.0):
+        dp3, q3, _ = held(3e3 * sign)
+        dp5, q5, _ = held(5e3 * sign)
+        slope = (q5 - q3) / (dp5 - dp3)
+        print(f'held load {sign * 5:+.0f} kN: leakage slope {slope:.4g} m^3/(s Pa); '
+              f'C_p + C_c + C_r = {p.C_p + p.C_c + p.C_r:.4g}, eq. 3.22 {p.C_eq:.4g}')
+        assert slope == pytest.approx(p.C_p + p.C_c + p.C_r, rel=0.01)
+    assert linear.operating_leakage(params, -5e3) == p.C_p + p.C_c + p.C_r
+    fam = {'C_eq': np.array([1.0, 10.0, 1.0]), 'leak_split': np.array([1.0, 1.0, 0.5])}
+    m = linear.loaded_C_eq(params, fam, 5e3)
+    assert m[0] == pytest.approx(5.6 / 3.8) and m[1] == pytest.approx(56 / 3.8)
+    assert m[2] == pytest.approx((3.8 - 0.9 + 1.8) / 3.8)        # C_r halved, C_eq kept

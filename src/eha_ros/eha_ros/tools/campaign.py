@@ -17,6 +17,12 @@ Only the plant varies; estimator, controller and switch manager keep config/'s n
 Output (--out, default out/campaign/<scenario>-<family>-<time>/): results.parquet (one row per
 plant), campaign.json, report.md with plots, traces.npz, parts/ (rows as they finish).
 Ctrl-C keeps the finished rows; --resume DIR runs the rest.
+Seeds: each run draws its own noise from (--seed, its run id); random:N is drawn with --seed.
+Several scenarios and/or --seeds A-B run as a set on one cluster: one campaign folder per
+scenario and seed under --out, and summary.md / summary.json (passed per seed, the worst seed,
+every failure). Figures of record come from the held-out seeds 101-105 (--seeds record), which
+no tuning reads; tuning looks at seeds 1-5 (--seeds tuning). Rerunning a set with the same
+--out keeps its finished campaigns and resumes the unfinished one.
 --compare A B: did a change move anything? (e.g. the same campaign before and after a refactoring)
 Scale out: on each machine install the repository (scripts/setup), then
   .venv/bin/dask scheduler                       # on one machine, port 8786
@@ -33,12 +39,16 @@ def main(argv=None) -> int:
                     'QFT controller, switch manager; batch, compiled) on every plant of a '
                     'family, in parallel on Dask.',
         epilog=EPILOG.format(names=', '.join(scenarios.available())))
-    ap.add_argument('scenario', nargs='?', help='scenario name or YAML path (optional with '
-                                                '--resume)')
+    ap.add_argument('scenario', nargs='*', help='scenario name(s) or YAML path(s) (none with '
+                                                '--resume); several run as a set')
     ap.add_argument('--family', default='thesis', help='thesis | random:N | FILE '
                                                       '(default thesis)')
-    ap.add_argument('--seed', type=int, default=1, help='noise seed of every run and seed of '
-                                                       'the random family (default 1)')
+    ap.add_argument('--seed', type=int, default=None,
+                    help='campaign seed: each run draws its noise from (seed, run id); also '
+                         'the seed of the random family (default 1)')
+    ap.add_argument('--seeds', default=None, metavar='A-B',
+                    help='run the scenario(s) on each of these seeds as a set: A-B, a comma '
+                         'list, "record" (the held-out 101-105) or "tuning" (1-5)')
     ap.add_argument('--workers', type=int, default=None,
                     help='LocalCluster worker processes (default: one per core)')
     ap.add_argument('--scheduler', default=None,
@@ -65,6 +75,11 @@ def main(argv=None) -> int:
             print('\n'.join(summary(result)))
             return 0 if result.identical else 1
         from ..core.sim.campaign import run_campaign
+        if args.seed is not None and args.seeds is not None:
+            raise UsageError('give --seed or --seeds, not both')
+        if args.resume and (args.seeds or len(args.scenario) > 1):
+            raise UsageError('--resume finishes one campaign; to finish a set, run the same '
+                             'command with the same --out again')
         if args.workers is not None and args.workers < 1:
             raise UsageError(f'--workers {args.workers}: expected at least 1')
         if args.scheduler and args.workers:
@@ -72,7 +87,10 @@ def main(argv=None) -> int:
                              'cluster decides: give one of them')
         if args.resume and args.out:
             raise UsageError('--resume DIR writes into DIR: drop --out')
-        res = run_campaign(args.scenario, args.family, args.seed, args.workers, args.scheduler,
+        if args.seeds is not None or len(args.scenario) > 1:
+            return run_set(args)
+        res = run_campaign(args.scenario[0] if args.scenario else None, args.family,
+                           1 if args.seed is None else args.seed, args.workers, args.scheduler,
                            args.out, args.resume, progress=not args.quiet,
                            report=not args.no_report,
                            log=lambda s: print(s, file=sys.stderr, flush=True))
@@ -91,6 +109,41 @@ def main(argv=None) -> int:
         return 0
 
     return guarded('campaign', run)
+
+
+def run_set(args) -> int:
+    """Several scenarios and/or seeds on one cluster (core.sim.campaign_set)."""
+    from ..core.config.cli import UsageError
+    from ..core.sim import campaign as C
+    from ..core.sim import campaign_set as CS
+    if not args.scenario:
+        raise UsageError('no scenario given: name one or more')
+    seeds = CS.parse_seeds(args.seeds) if args.seeds is not None else \
+        [1 if args.seed is None else args.seed]
+    out = args.out or C.default_out('set', args.family)
+    for s in args.scenario:                           # bad names fail before the cluster
+        C.SC.load(s)
+    C.FAM.resolve(args.family, seeds[0])
+    client, cluster = C.connect(args.workers, args.scheduler)
+    log = (lambda s: print(s, file=sys.stderr, flush=True))
+    try:
+        summary = CS.run_set(args.scenario, args.family, seeds, out, client, log=log,
+                             progress=not args.quiet, report=not args.no_report)
+    finally:
+        if cluster is not None:
+            C.quiet_shutdown(client)
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    roles = ', '.join(sorted(set(summary['roles'].values())))
+    print(f'campaign set {args.family}, seeds {args.seeds or seeds[0]} ({roles}): '
+          f'{summary["wall_s"]:.0f} s')
+    for name, s in summary['scenarios'].items():
+        per = ' '.join(f'{k}:{v["passed"]}' for k, v in s['per_seed'].items())
+        print(f'  {name}: {per} of {s["runs"]}; worst seed {s["worst_seed"]} '
+              f'({s["worst_passed"]}), {len(s["failures"])} failing runs in all')
+    print(f'summary: {out}/summary.md')
+    return 0
 
 
 if __name__ == '__main__':

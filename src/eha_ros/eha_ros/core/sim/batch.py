@@ -135,10 +135,10 @@ class BatchLoop:
     def tick(self, k: int, reference: float, load: float, row) -> None:
         """Tick k as the stack does it; writes its record ``row`` (core.sim.closed_loop R_*)."""
         from .closed_loop import (R_ACTIVE, R_BYPASS, R_CHANNEL, R_EN, R_FAULT, R_I, R_IM,
-                                  R_INNOV, R_NIS, R_NISDIM, R_P, R_PM, R_SKIP, R_STATE, R_T,
-                                  R_U, R_V0, R_VALVE, R_VERDICT, R_VHAT, R_W, R_WM, R_X, R_X0,
-                                  R_XHAT, R_XM)
-        from ..plant.layout import S_V
+                                  R_GM, R_INNOV, R_NIS, R_NISDIM, R_P, R_PM, R_SKIP, R_STATE,
+                                  R_T, R_U, R_V0, R_VALVE, R_VERDICT, R_VHAT, R_W, R_WM, R_X,
+                                  R_X0, R_XHAT, R_XM)
+        from ..plant.layout import S_GM, S_V
         from ..redundancy.health import ChannelSample
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
         t = k * self.Ts
@@ -147,7 +147,7 @@ class BatchLoop:
         for event in self.events.get(k, ()):
             event(plant)
         m = plant.measure()
-        x0, v0 = plant.position, float(plant.S[S_V])
+        x0, v0, gm0 = plant.position, float(plant.S[S_V]), float(plant.S[S_GM])
         if est is not None:
             r = est.update(m.position, m.motor_speed, m.pressure_a, m.pressure_b,
                            m.active_channel, valid=m.valid)
@@ -198,6 +198,7 @@ class BatchLoop:
         row[R_CHANNEL] = m.active_channel
         row[R_PM], row[R_PM + 1], row[R_IM:R_IM + 2] = m.pressure_a, m.pressure_b, m.motor_current
         row[R_V0], row[R_VHAT], row[R_VERDICT], row[R_SKIP] = v0, v_hat, verdict, skipped
+        row[R_GM] = gm0
         row[R_P], row[R_P + 1] = tr.pressure_a, tr.pressure_b
         if mgr is not None:
             from ..redundancy.state_machine import STATE_CODES

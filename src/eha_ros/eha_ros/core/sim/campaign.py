@@ -35,10 +35,11 @@ from ..config.params import ParamError
 from ..io.report import write_json
 from . import family as FAM
 from . import scenarios as SC
+from .campaign_set import seed_role
 
 NODES = SC.NODES
 MULT = FAM.COLUMNS
-ID_COLUMNS = ('run_id',) + MULT + ('seed',)
+ID_COLUMNS = ('run_id',) + MULT + ('seed', 'noise_seed')
 
 
 @dataclass
@@ -74,7 +75,7 @@ def run_chunk(scn_doc: dict, nominal: dict, rows: list, trace: bool = True):
         t0 = time.perf_counter()
         r = dict(row)
         try:
-            figs, tr = SC.run(scn, nominal, row, int(row['seed']), trace=trace)
+            figs, tr = SC.run(scn, nominal, row, int(row['noise_seed']), trace=trace)
             r.update(figs)
             r['passed'], r['failed_specs'] = SC.judge(r, scn.specs)
             r['error'] = ''
@@ -87,6 +88,40 @@ def run_chunk(scn_doc: dict, nominal: dict, rows: list, trace: bool = True):
         out.append(r)
         traces.append(tr)
     return out, traces
+
+
+def noise_seed(seed: int, run_id: int) -> int:
+    """The noise seed of run ``run_id`` of a campaign with seed ``seed``: one independent
+    stream per run (numpy's SeedSequence with the run as its spawn key), so no two plants of a
+    campaign share a noise realization and the pair (seed, run) reproduces the run."""
+    seq = np.random.SeedSequence(int(seed), spawn_key=(int(run_id),))
+    return int(seq.generate_state(1, np.uint64)[0] >> np.uint64(1))    # 63 bits: int64 column
+
+
+def linear_columns(scn, fam: dict, nominal: dict, config_dir: str | None = None) -> dict:
+    """Per-plant columns of core.sim.linear for the scenario's specs and report: ``lin_*`` of
+    each plant with eq. 3.22's leakage; for a held load (load_step, stiffness) also
+    ``loaded_C_eq`` (the C_eq multiplier at the operating point of the scenario's force,
+    linear.operating_leakage), ``loaded_in_table`` (that multiplier inside Table 4.5's C_eq
+    range, config/qft_spec.yaml) and ``lin_loaded_*`` (the linear loop of that plant)."""
+    from . import linear
+    scales = np.column_stack([fam[c] for c in FAM.NAMES])
+    p = scn.params
+    kw = dict(plant=nominal['plant_sim'], controller=nominal['controller'],
+              load_step_n=p.get('force', 5e3))
+    out = linear.predict(scales, freqs_hz=p.get('freqs', linear.FREQS_HZ),
+                         stiff_freqs_hz=p.get('freqs', linear.STIFF_FREQS_HZ), **kw)
+    if scn.kind in ('load_step', 'stiffness'):
+        c = linear.loaded_C_eq(nominal['plant_sim'], fam, p['force'])
+        lo, hi = linear.default_spec(config_dir)['family.C_eq_range']
+        out['loaded_C_eq'] = c
+        out['loaded_in_table'] = (c >= lo * (1 - 1e-9)) & (c <= hi * (1 + 1e-9))
+        scales[:, 0] = c
+        loaded = linear.predict(scales, freqs_hz=(), stiff_freqs_hz=p.get('freqs', ()),
+                                load_step=scn.kind == 'load_step', **kw)
+        out.update({k.replace('lin_', 'lin_loaded_', 1): v for k, v in loaded.items()})
+    return {k: (np.asarray(v, bool) if k == 'loaded_in_table' else np.asarray(v, float))
+            for k, v in out.items()}
 
 
 # ------------------------------------------------------------------------------ engine
@@ -293,7 +328,8 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
                  chunk_size: int | None = None, trace: bool = True,
                  log=print) -> CampaignResult:
     """Run ``scenario`` (name in config/campaigns/ or a YAML path) on ``family`` ('thesis',
-    'random:N' or a CSV/Parquet of multipliers) with noise seed ``seed``.
+    'random:N' or a CSV/Parquet of multipliers) with campaign seed ``seed``: each run draws
+    its own noise from (seed, run id) (:func:`noise_seed`); random:N is drawn with it.
 
     workers/scheduler choose the engine (a LocalCluster of ``workers`` processes, default one
     per core; or the Dask scheduler at ``scheduler``); ``client`` reuses an existing
@@ -302,6 +338,8 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
     before anything is written."""
     import pandas as pd
     t_start = time.monotonic()
+    if int(seed) < 0:
+        raise UsageError(f'seed {seed}: expected a non-negative integer')
     if resume:
         info0, fam, scn, seed = _resume_inputs(resume, scenario)
         out, family = resume, info0['family']
@@ -326,16 +364,11 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         raise UsageError(f'scenario {scn.path or scn.name}: overrides: {err}') from None
     n = len(fam['C_eq'])
     table = pd.DataFrame({'run_id': np.arange(n), **{c: fam[c] for c in MULT},
-                          'seed': np.full(n, int(seed))})
+                          'seed': np.full(n, int(seed)),
+                          'noise_seed': [noise_seed(seed, i) for i in range(n)]})
     if SC.linear_columns(scn):
-        from . import linear
-        lin = linear.predict(table[list(FAM.NAMES)].to_numpy(),
-                             freqs_hz=scn.params.get('freqs', linear.FREQS_HZ),
-                             stiff_freqs_hz=scn.params.get('freqs', linear.STIFF_FREQS_HZ),
-                             load_step_n=scn.params.get('force', 5e3),
-                             plant=nominal['plant_sim'], controller=nominal['controller'])
-        for k, v in lin.items():
-            table[k] = np.asarray(v, float)
+        for k, v in linear_columns(scn, fam, nominal, config_dir).items():
+            table[k] = v
     # the engine last: a bad scheduler address fails before anything is written
     own = client is None
     cluster = None
@@ -352,7 +385,8 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         done_df, done_traces = read_parts(out, with_traces=bool(resume))
         done = set(int(i) for i in done_df['run_id']) if len(done_df) else set()
         todo = [i for i in range(n) if i not in done]
-        info = dict(scenario=scn.as_dict(), family=family, seed=int(seed), count=n,
+        info = dict(scenario=scn.as_dict(), family=family, seed=int(seed),
+                    seed_role=seed_role(int(seed)), count=n,
                     workers=n_workers, scheduler=scheduler or 'LocalCluster',
                     dashboard=getattr(client, 'dashboard_link', ''), complete=False)
         write_json(os.path.join(out, 'campaign.json'), dict(info, passed=0, failed=0), True)

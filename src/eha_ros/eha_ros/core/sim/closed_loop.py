@@ -56,7 +56,8 @@ R_VHAT = 29      # estimated velocity (m/s)
 R_VERDICT = 30   # estimator consistency verdict (adapt.VERDICTS)
 R_SKIP = 31      # 1: the estimator skipped this update
 R_P = 32         # true chamber pressures p_A, p_B after the step (Pa)
-NREC = 34
+R_GM = 34        # the position sensor's Gauss-Markov offset in the measured position (m)
+NREC = 35
 
 
 @njit(cache=True)
@@ -129,6 +130,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
             fault[c] = U[L.U_FAIL0 + c] > 0.5
         x0 = S[L.S_X]
         v0 = S[L.S_V]
+        gm0 = S[L.S_GM]
         w_act = meas[L.M_W0 + ch]
         if has_est:
             x_hat, innov, nis, nd, code = ES.estimate(ek, ee, ea, pos, w_act, pa, pb)
@@ -172,6 +174,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         r[R_PM] = pa
         r[R_PM + 1] = pb
         r[R_V0] = v0
+        r[R_GM] = gm0
         r[R_VHAT] = x[1] if has_est else math.nan
         r[R_VERDICT] = ee[ES.E_MON + EA.MS_VERDICT] if has_est else 0
         r[R_SKIP] = 0

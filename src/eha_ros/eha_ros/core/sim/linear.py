@@ -80,6 +80,39 @@ def _fhz(f) -> str:
     return f'{int(f)}' if f.is_integer() else f'{f:g}'.replace('.', 'p')
 
 
+# ------------------------------------------------------------------------------ operating point
+def operating_leakage(plant: dict, load: float) -> float:
+    """C_eq [m^3/(s Pa)] of the loop holding a constant load F_L: eq. 3.22's C_p + C_c + C_r/2
+    while both chambers stay above the boost check valves, C_p + C_c + C_r once the load puts
+    the unloaded chamber on its check valve (Fig. 3.12).
+
+    Held (v = 0) with p_A - p_B = dp = |F_L|/A_p, the two chambers' flow balances (eq. 3.15)
+    add up to C_r (p_A + p_B - 2 p_acc) = q_check: without a check-valve flow the pair is
+    symmetric about the accumulator, p_B = p_acc - dp/2. Once dp/2 exceeds the cracking
+    pressure the valve holds p_B at p_acc - crack, p_A = p_B + dp, and the pump covers
+    D_p omega = (C_p + C_c) dp + C_r (p_A - p_acc) = (C_p + C_c + C_r) dp - C_r crack: the loaded
+    chamber loses its whole external leakage. The eta_v map of eq. 3.31 is not modelled here
+    (the linear family of eq. 3.35 uses C_p, C_c, C_r)."""
+    from ..plant.parameters import PlantParams
+    p = PlantParams.from_dict(plant)
+    if abs(load) / p.A_p / 2.0 > plant['plant.valves.check_crack']:
+        return p.C_p + p.C_c + p.C_r
+    return p.C_eq
+
+
+def loaded_C_eq(base: dict, rows: dict, load: float) -> np.ndarray:
+    """Multipliers of ``base``'s C_eq (eq. 3.22) at the operating point of each plant of
+    ``rows`` (core.sim.family columns, a missing one nominal) holding ``load`` N
+    (operating_leakage)."""
+    from ..plant.parameters import PlantParams
+    from .family import COLUMNS, plant_params
+    n = len(rows['C_eq'])
+    c0 = PlantParams.from_dict(base).C_eq
+    return np.array([operating_leakage(plant_params(
+        base, {c: float(rows[c][i]) if c in rows else 1.0 for c in COLUMNS}), load)
+        for i in range(n)]) / c0
+
+
 # ------------------------------------------------------------------------------ models
 def cascade(scales, plant: dict, Gv: Zpk, delay: float, drive_kT: str = 'plant'):
     """qft.family.CascadePlants of the variants (rows of ``scales``, nominal plant.yaml

@@ -21,7 +21,8 @@ import re
 import numpy as np
 
 MULTIPLIERS = ('C_eq', 'D_p', 'beta', 'k_T', 'k_E', 'friction', 'noise', 'leak_split')
-ID_COLUMNS = ('run_id', 'seed', 'passed', 'failed_specs', 'error', 'wall_s', 'plant_s')
+ID_COLUMNS = ('run_id', 'seed', 'noise_seed', 'passed', 'failed_specs', 'error', 'wall_s',
+              'plant_s')
 HEADLINE = {
     'step': ('overshoot_pct', 'settling_s', 'steady_error_m', 'estimate_error_m'),
     'load_step': ('peak_deviation_m', 'steady_error_m', 'estimate_error_m'),
@@ -76,20 +77,25 @@ def fmt(name: str, value) -> str:
 
 
 # ------------------------------------------------------------------------------ figures of merit
-def spec_limit(row, form: str, v) -> float:
-    """The limit a spec puts on one row (scenarios.limit: max_rel = factor x row[to] + offset)."""
+def spec_limit(row, spec) -> float:
+    """The limit a spec puts on one row (scenarios.limit: the case that applies to the row;
+    max_rel / min_rel = factor x row[to] + offset)."""
     from .scenarios import limit
-    figs = {k: x for k, x in row.items() if _is_number(x)}
-    return limit({form: v}, figs)[1]
+    return limit(spec, row)[1]
 
 
-def requirement(metric: str, s: dict) -> str:
-    """'<= 5 %', '>= 49 kN/mm', '<= 1.25 x lin_peak_deviation_m + 0.05 mm'."""
+def requirement(metric: str, s) -> str:
+    """'<= 5 %', '>= 49 kN/mm', '<= 1.25 x lin_peak_deviation_m + 0.05 mm'; a list of cases
+    as 'where C: ...; else ...'."""
+    if isinstance(s, list):
+        return '; '.join((f'where {c["where"]}: ' if 'where' in c else 'else ' if i else '') +
+                         requirement(metric, {k: v for k, v in c.items() if k != 'where'})
+                         for i, c in enumerate(s))
     form, v = next(iter(s.items()))
-    if form == 'max_rel':
+    if form.endswith('_rel'):
         off = v.get('offset', 0.0)
         tail = f' + {fmt(metric, off)}' if off else ''
-        return f'<= {v.get("factor", 1.0):g} x {v["to"]}{tail}'
+        return f'{"<=" if form == "max_rel" else ">="} {v.get("factor", 1.0):g} x {v["to"]}{tail}'
     return f'{"<=" if form == "max" else ">="} {fmt(metric, v)}'
 
 
@@ -99,10 +105,9 @@ def normalised_excess(row, specs: dict) -> tuple[float, str]:
     if str(row.get('error', '') or ''):
         return math.inf, 'error'
     from .scenarios import excess
-    figs = {k: v for k, v in row.items() if _is_number(v)}
     if not specs:
         return -math.inf, ''
-    return excess(figs, specs)
+    return excess(row, specs)
 
 
 def _is_number(v) -> bool:
@@ -128,21 +133,25 @@ def worst_runs(results, specs: dict, n: int = 10):
 
 def spec_summary(results, specs: dict) -> list[dict]:
     """Per spec: requirement, runs evaluated, passed, worst value and its run, median value."""
+    from .scenarios import limit
     out = []
     rows = results.to_dict('records')
     for metric, s in specs.items():
-        form, v = next(iter(s.items()))
         x = (results[metric].to_numpy(float) if metric in results
              else np.full(len(results), np.nan))
-        lim = np.array([spec_limit(r, form, v) for r in rows], float)
-        ok = np.isfinite(x) & np.isfinite(lim) & ((x <= lim) if form != 'min' else (x >= lim))
+        forms = [limit(s, r) for r in rows]
+        lim = np.array([f[1] for f in forms], float)
+        is_max = np.array([f[0] == 'max' for f in forms], bool)
+        ok = np.isfinite(x) & np.isfinite(lim) & np.where(is_max, x <= lim, x >= lim)
         finite = np.isfinite(x)
         if finite.any():
-            if form == 'max_rel':
-                e = np.where(finite, x / lim - 1, -np.inf)
-                i = int(np.nanargmax(e))
+            rel = isinstance(s, list) or next(iter(s)).endswith('_rel')
+            if rel:                          # per-row limits: the largest normalised excess
+                with np.errstate(divide='ignore', invalid='ignore'):
+                    e = np.where(is_max, x / lim - 1, 1 - x / lim)
+                i = int(np.nanargmax(np.where(finite, e, -np.inf)))
             else:
-                i = int(np.nanargmax(x) if form == 'max' else np.nanargmin(x))
+                i = int(np.nanargmax(x) if is_max[0] else np.nanargmin(x))
             worst, worst_id = float(x[i]), int(results['run_id'].iloc[i])
             median = float(np.nanmedian(x))
         else:
@@ -177,7 +186,7 @@ def metric_columns(results, info: dict) -> list[str]:
     specs = list((scn.get('specs') or {}).keys())
     head = list(HEADLINE.get(scn.get('kind', ''), ()))
     skip = set(MULTIPLIERS) | set(ID_COLUMNS) | {'max_abs_command'}
-    rest = [c for c in results.columns if c not in skip and not c.startswith('lin_')
+    rest = [c for c in results.columns if c not in skip and not c.startswith(('lin_', 'loaded_'))
             and results[c].dtype.kind in 'fiu']
     out = []
     for c in specs + head + rest:
@@ -227,13 +236,14 @@ def sweep_table(results) -> dict:
 def stiffness_table(results) -> dict:
     """Measured and linear stiffness (kN/mm) per run and frequency, (N, F)."""
     k = dict(frequency_columns(results, 'stiffness_kn_per_mm'))
-    lk = dict(frequency_columns(results, 'lin_stiffness_kn_per_mm'))
     f = sorted(k)
     out = {'f_hz': np.asarray(f, float),
            'stiffness': results[[k[x] for x in f]].to_numpy(float) if f else
            np.zeros((len(results), 0))}
-    if f and all(x in lk for x in f):
-        out['lin_stiffness'] = results[[lk[x] for x in f]].to_numpy(float)
+    for name in ('lin_stiffness', 'lin_loaded_stiffness'):
+        lk = dict(frequency_columns(results, name + '_kn_per_mm'))
+        if f and all(x in lk for x in f):
+            out[name] = results[[lk[x] for x in f]].to_numpy(float)
     return out
 
 
@@ -320,14 +330,15 @@ def plot_envelope(path, info: dict, results, traces: dict) -> str:
         bnd = float(params.get('band', 0.02))
         ax.axhspan(a * 1e3 * (1 - bnd), a * 1e3 * (1 + bnd), color='g', alpha=0.12,
                    label=f'+-{bnd * 100:g} % settling band')
-        if 'settling_s' in specs and 'max' in specs['settling_s']:
+        if isinstance(specs.get('settling_s'), dict) and 'max' in specs['settling_s']:
             ax.axvline(ts + specs['settling_s']['max'], color='g', ls=':',
                        label='settling time limit')
         ax.set_title(f'{scn.get("name", kind)}: {a * 1e3:g} mm step, true position')
         ax.legend(fontsize=7, loc='lower right')
         ax = axes[1]
         band(ax, y, 1e3, 'truth - reference')
-        se = specs.get('steady_error_m', {}).get('max')
+        se = specs['steady_error_m'].get('max') if isinstance(
+            specs.get('steady_error_m'), dict) else None
         if se is not None:
             st = params.get('steady', [1.0, 1.5])
             ax.fill_between([ts + st[0], ts + st[1]], -se * 1e3, se * 1e3, color='g', alpha=0.25,
@@ -371,6 +382,9 @@ def plot_stiffness(path, results) -> str:
         lo, hi = np.nanmin(st['lin_stiffness'], 0), np.nanmax(st['lin_stiffness'], 0)
         ax.fill_between(f, lo, hi, color=BLUE, alpha=0.15,
                         label='linear prediction, min..max over the plants')
+    if 'lin_loaded_stiffness' in st:
+        ax.plot(f, np.nanmin(st['lin_loaded_stiffness'], 0), color=BLUE, ls='--',
+                label='linear at the loaded leakage (C_p + C_c + C_r), smallest')
     w = np.logspace(np.log10(2 * np.pi * max(0.5, f.min() / 2 if len(f) else 0.5)),
                     np.log10(2 * np.pi * (f.max() * 2 if len(f) else 20)), 200)
     b = bounds(w=w)
@@ -440,15 +454,17 @@ def plot_sweep(path, results) -> str:
 
 
 def plot_relative(path, results, specs: dict) -> str | None:
-    """Each max_rel spec: metric vs the column it is relative to, with the limit line."""
-    rel = [(m, s['max_rel']) for m, s in specs.items()
-           if 'max_rel' in s and m in results and s['max_rel']['to'] in results]
+    """Each spec relative to another column (max_rel / min_rel, alone or as a case): the metric
+    against that column, with the limit line of that case."""
+    rel = [(m, form, c[form]) for m, s in specs.items()
+           for c in (s if isinstance(s, list) else [s])
+           for form in c if form.endswith('_rel') and m in results and c[form]['to'] in results]
     if not rel:
         return None
     plt = _plt()
     ok = results['passed'].astype(bool).to_numpy()
     fig, axes = plt.subplots(1, len(rel), figsize=(5.5 * len(rel), 4.8), squeeze=False)
-    for ax, (m, v) in zip(axes[0], rel):
+    for ax, (m, form, v) in zip(axes[0], rel):
         x = results[v['to']].to_numpy(float)
         y = results[m].to_numpy(float)
         sx, ux = metric_unit(v['to'])
@@ -457,7 +473,7 @@ def plot_relative(path, results, specs: dict) -> str | None:
         ax.scatter(x[~ok] * sx, y[~ok] * sy, s=14, color=RED, label='failing run (any spec)')
         xs = np.linspace(0, np.nanmax(x) * 1.05 if np.isfinite(x).any() else 1, 50)
         ax.plot(xs * sx, (v.get('factor', 1.0) * xs + v.get('offset', 0.0)) * sy, 'k--',
-                label=f'limit {requirement(m, {"max_rel": v})}')
+                label=f'limit {requirement(m, {form: v})}')
         ax.plot(xs * sx, xs * sy, color=BLUE, lw=0.8, label='equal')
         ax.set_xlabel(label(v['to']))
         ax.set_ylabel(label(m))
@@ -480,7 +496,9 @@ def plot_scatter_grid(path, results, metrics: list, mults: list, specs: dict) ->
     for i, m in enumerate(metrics):
         y = results[m].to_numpy(float)
         s, _ = metric_unit(m)
-        lim = specs.get(m, {})
+        spec = specs.get(m, {})
+        lim = {k: v for c in (spec if isinstance(spec, list) else [spec])
+               for k, v in c.items() if k in ('max', 'min')}
         for j, c in enumerate(mults):
             ax = axes[i, j]
             x = results[c].to_numpy(float)
@@ -576,7 +594,8 @@ def write_report(out_dir: str, info: dict, results, traces: dict | None) -> str:
             ('plant-s per wall-s', _num(info.get('plant_s_per_wall_s', ''), 4)),
             ('workers', info.get('workers', '')),
             ('scheduler', info.get('scheduler', '')),
-            ('noise seed', info.get('seed', ''))]
+            ('campaign seed', f'{info.get("seed", "")} ({info.get("seed_role", "?")}; each run '
+                              'draws its own noise from the seed and its run id)')]
     md += _table(['item', 'value'], rows) + ['']
 
     # specs
@@ -633,8 +652,7 @@ def write_report(out_dir: str, info: dict, results, traces: dict | None) -> str:
         if spec == 'error':
             val, lim = '', ''
         elif spec:
-            form, v = next(iter(specs[spec].items()))
-            val, lim = fmt(spec, r.get(spec, math.nan)), fmt(spec, spec_limit(r, form, v))
+            val, lim = fmt(spec, r.get(spec, math.nan)), fmt(spec, spec_limit(r, specs[spec]))
         else:
             val = lim = ''
         ex = r['excess']

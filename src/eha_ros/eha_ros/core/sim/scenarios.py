@@ -9,6 +9,9 @@ A scenario is a YAML file (config/campaigns/<name>.yaml; users add their own)::
     specs:                              # pass/fail per figure (SI units)
       overshoot_pct: {max: 5.0}
       peak_deviation_m: {max_rel: {to: lin_peak_deviation_m, factor: 1.25, offset: 5.0e-5}}
+      stiffness_kn_per_mm_7hz:          # cases: the first whose `where` column is true
+        - {where: loaded_in_table, min: 49.0}
+        - {min_rel: {to: lin_loaded_stiffness_kn_per_mm_7hz, factor: 0.9}}
     overrides:                          # optional: node parameters changed for every run, as
       controller:control.rate_limit: 5.0  # -p node:key:=value (e.g. reference limits lifted)
 
@@ -56,7 +59,7 @@ KINDS = {
     'motor_fail': dict(amplitude=3e-3, freq=3.0, load=10e3, load_time=1.0, t_fault=2.0,
                        duration=3.0),
 }
-SPEC_FORMS = ('max', 'min', 'max_rel')
+SPEC_FORMS = ('max', 'min', 'max_rel', 'min_rel')
 NODES = ('plant_sim',) + LOOP_NODES    # what one run builds (core.config.registry)
 TRACE_POINTS = 1500          # decimated samples per trace kept for the report
 
@@ -146,17 +149,7 @@ def from_dict(doc, path: str = '<dict>') -> Scenario:
     if not isinstance(specs, dict):
         raise UsageError(f'scenario {path}: specs: expected a mapping metric: {{max: v}}')
     for metric, s in specs.items():
-        if not (isinstance(s, dict) and len(s) == 1 and next(iter(s)) in SPEC_FORMS):
-            raise UsageError(f'scenario {path}: specs.{metric} = {s!r}: expected {{max: v}}, '
-                             f'{{min: v}} or {{max_rel: {{to: column, factor: f, offset: o}}}}')
-        form, v = next(iter(s.items()))
-        if form == 'max_rel':
-            if not (isinstance(v, dict) and isinstance(v.get('to'), str) and
-                    _num(v.get('factor', 1.0)) and _num(v.get('offset', 0.0))):
-                raise UsageError(f'scenario {path}: specs.{metric}.max_rel = {v!r}: expected '
-                                 f'{{to: column, factor: number, offset: number}}')
-        elif not _num(v):
-            raise UsageError(f'scenario {path}: specs.{metric}.{form} = {v!r}: expected a number')
+        _check_spec(s, f'scenario {path}: specs.{metric}')
     overrides = doc.get('overrides') or {}
     if not (isinstance(overrides, dict) and all(
             isinstance(k, str) and k.partition(':')[0] in NODES and k.partition(':')[2]
@@ -167,6 +160,34 @@ def from_dict(doc, path: str = '<dict>') -> Scenario:
                    str(doc.get('description', '')), params, specs, path, dict(overrides))
     _check_signals(scn, path)
     return scn
+
+
+SPEC_HELP = ('{max: v}, {min: v}, {max_rel: {to: column, factor: f, offset: o}}, {min_rel: ...} '
+             'or a list of such cases, each but the last with where: column')
+
+
+def _check_spec(s, where: str) -> None:
+    """A spec: one form (SPEC_FORMS), or a list of cases {where: column, <form>: v} of which
+    the first whose column is true applies; the last case has no ``where`` (the default)."""
+    cases = s if isinstance(s, list) else [s]
+    if not cases or not all(isinstance(c, dict) for c in cases):
+        raise UsageError(f'{where} = {s!r}: expected {SPEC_HELP}')
+    for i, c in enumerate(cases):
+        forms = [k for k in c if k != 'where']
+        # a list's last case is the default (no where); every other case of a list has one
+        where_ok = ('where' not in c if i == len(cases) - 1 else
+                    isinstance(c.get('where'), str)) if isinstance(s, list) else 'where' not in c
+        if not (len(forms) == 1 and forms[0] in SPEC_FORMS and where_ok):
+            raise UsageError(f'{where} = {s!r}: expected {SPEC_HELP}')
+        form, v = forms[0], c[forms[0]]
+        if form.endswith('_rel'):
+            if not (isinstance(v, dict) and isinstance(v.get('to'), str) and
+                    set(v) <= {'to', 'factor', 'offset'} and
+                    _num(v.get('factor', 1.0)) and _num(v.get('offset', 0.0))):
+                raise UsageError(f'{where}.{form} = {v!r}: expected '
+                                 f'{{to: column, factor: number, offset: number}}')
+        elif not _num(v):
+            raise UsageError(f'{where}.{form} = {v!r}: expected a number')
 
 
 def from_saved(doc: dict, path: str = '<saved>') -> Scenario:
@@ -256,7 +277,8 @@ def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool 
     """One run; returns (figures dict, decimated traces dict or None).
 
     multipliers: one family row (core.sim.family.COLUMNS; other keys are ignored)."""
-    from .closed_loop import R_ACTIVE, R_EN, R_FAULT, R_STATE, R_U, R_VALVE, R_X0, R_XHAT, R_XM
+    from .closed_loop import (R_ACTIVE, R_EN, R_FAULT, R_GM, R_STATE, R_U, R_VALVE, R_X0,
+                              R_XHAT, R_XM)
     from .switchover import schedule
     from .family import plant_params
     plant = plant_params(nominal['plant_sim'], multipliers)
@@ -267,7 +289,8 @@ def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool 
     rec = loop.run(ref, load).T
     t = np.arange(n) * Ts
     sig = dict(t=t, reference=ref, load=load, truth=rec[R_X0], estimate=rec[R_XHAT],
-               measured=rec[R_XM], command=rec[R_U], fault=rec[R_FAULT],
+               measured=rec[R_XM], sensor_lf=rec[R_X0] + rec[R_GM], command=rec[R_U],
+               fault=rec[R_FAULT],
                active=rec[R_ACTIVE], state=rec[R_STATE], valve=rec[R_VALVE:R_VALVE + 2],
                enable=rec[R_EN:R_EN + 2] > 0.5)
     figs = FIGURES[scn.kind](sig, scn.params, Ts)
@@ -281,12 +304,23 @@ def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool 
     return figs, tr
 
 
-def limit(spec: dict, figs: dict) -> tuple[str, float]:
-    """('max' | 'min', limit) of one spec; max_rel resolves against another column of the
-    same run (factor x column + offset)."""
-    form, v = next(iter(spec.items()))
-    if form == 'max_rel':
-        return 'max', v.get('factor', 1.0) * figs.get(v['to'], math.nan) + v.get('offset', 0.0)
+def case(spec, figs: dict) -> dict:
+    """The case of a spec that applies to one run: the spec itself, or of a list of cases the
+    first whose ``where`` column is true in ``figs`` (the last case has none)."""
+    if isinstance(spec, dict):
+        return spec
+    for c in spec:
+        if 'where' not in c or bool(figs.get(c['where'], False)):
+            return c
+    return spec[-1]
+
+
+def limit(spec, figs: dict) -> tuple[str, float]:
+    """('max' | 'min', limit) of one spec on one run; max_rel / min_rel resolve against
+    another column of the same run (factor x column + offset)."""
+    form, v = next((k, x) for k, x in case(spec, figs).items() if k != 'where')
+    if form.endswith('_rel'):
+        return form[:3], v.get('factor', 1.0) * figs.get(v['to'], math.nan) + v.get('offset', 0.0)
     return form, float(v)
 
 
@@ -338,14 +372,18 @@ def step_figures(s, p, Ts):
 
 
 def load_step_figures(s, p, Ts):
-    """Peak |x| after the load step and |mean x| over the steady window (target 0)."""
+    """Peak |x| after the load step; steady error over the window (target 0): of what the
+    position sensor reports without its white noise, truth + its Gauss-Markov offset (held,
+    nothing observes that offset, so no estimator can be charged for it), and of the truth
+    alone (``steady_error_truth_m``)."""
     t, x = s['t'], s['truth']
     after = t >= p['t_step'] - 1e-9
     ta = t[after] - p['t_step']
     win = (ta >= p['steady'][0]) & (ta <= p['steady'][1])
     x0 = float(np.mean(x[(t < p['t_step']) & (t >= p['t_step'] - 0.2)]))
     return {'peak_deviation_m': float(np.max(np.abs(x[after] - x0))),
-            'steady_error_m': float(abs(np.mean(x[after][win]))),
+            'steady_error_m': float(abs(np.mean(s['sensor_lf'][after][win]))),
+            'steady_error_truth_m': float(abs(np.mean(x[after][win]))),
             'estimate_error_m': float(abs(np.mean(s['estimate'][after][win] - x[after][win])))}
 
 
