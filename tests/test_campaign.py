@@ -213,8 +213,8 @@ def test_spec_cases_pick_the_first_whose_column_is_true(tmp_path):
     """The stiffness bound of issue 42 (decision 4): 49 kN/mm where the loaded leakage stays in
     Table 4.5, 0.9 x the linear loop at the loaded leakage beyond it."""
     spec = SC.load('stiffness').specs['stiffness_kn_per_mm_7hz']
-    inside = {'loaded_in_table': True, 'lin_loaded_stiffness_kn_per_mm_7hz': 37.2}
-    beyond = dict(inside, loaded_in_table=False)
+    inside = {'loaded_beyond_table': False, 'lin_loaded_stiffness_kn_per_mm_7hz': 37.2}
+    beyond = dict(inside, loaded_beyond_table=True)
     assert SC.limit(spec, inside) == ('min', 49.0)
     assert SC.limit(spec, beyond) == ('min', pytest.approx(0.9 * 37.2))
     specs = {'stiffness_kn_per_mm_7hz': spec}
@@ -225,7 +225,7 @@ def test_spec_cases_pick_the_first_whose_column_is_true(tmp_path):
         pytest.approx(1 - 33.48 / 33.48, abs=1e-3)
     from eha_ros.core.sim.report import requirement
     assert requirement('stiffness_kn_per_mm_7hz', spec) == \
-        'where loaded_in_table: >= 49 kN/mm; else >= 0.9 x lin_loaded_stiffness_kn_per_mm_7hz'
+        'where loaded_beyond_table: >= 0.9 x lin_loaded_stiffness_kn_per_mm_7hz; else >= 49 kN/mm'
     p = tmp_path / 's.yaml'
     for bad in ('[{where: a, min: 1}]',                       # no default case last
                 '[{min: 1}, {where: a, min: 2}]',             # the default not last

@@ -157,6 +157,8 @@ class Estimator:
         self.flow_share, self.flow_report = params[m + 'flow_share'], params[m + 'flow_report']
         self.flow_s = np.zeros(adapt.NFLOW)       # adapt.flow_noise's state
         self.offset_gate, self.q_x_offset = params[m + 'offset_gate'], params[m + 'q_x_offset']
+        t = params[m + 'hold_blend_time']
+        self.hold_rate = self.Ts / t if t > 0 else 0.0
         self.offset_alpha = tuple(self.Ts / params[m + key] for key in (
             'offset_time', 'offset_load_mean', 'offset_load_time'))
         self.offset_s = np.zeros(adapt.NOFS)     # adapt.offset_noise's state
@@ -228,7 +230,7 @@ class Estimator:
         self.started = False
         self._saved = None
         self.omega_prev = self.w_fric = self.pd_meas = self.pd_filt = 0.0
-        self.kernel[1][stepper.E_UPDATES] = 0.0
+        self.kernel[1][stepper.E_UPDATES] = self.kernel[1][stepper.E_HOLDW] = 0.0
         self.detector.reset()
         self.monitor_s[:] = 0.0
         self.flow_s[:] = 0.0
@@ -384,7 +386,9 @@ class Estimator:
     def _result(self, innovation, nis, skipped, rejected, m) -> EstimateResult:
         kf = self.kf
         pd = kf.pressure_diff if self.is_model else self.pd_meas
-        return EstimateResult(kf.position, kf.velocity, pd, kf.position_variance, innovation,
+        return EstimateResult(stepper.published(self.kernel[1], kf.x,
+                                                int(self.kernel[0][stepper.K_IGM])),
+                              kf.velocity, pd, kf.position_variance, innovation,
                               nis, skipped, self.detector.code, rejected, m, self.consistency,
                               self.omega_prev if self.started else math.nan)
 

@@ -128,10 +128,9 @@ ESTIMATOR = Schema('estimator', [
               'like a leak): the load-step spec\'s steady error (20 um) per second'),
     Param(E + 'model.offset_gate', 'float', '', 2.0, 0.0, 1e6,
           doc='chambers: while the sensor-offset estimate b has a mean square (over offset_time) '
-              'above this^2 x its stationary sigma^2 (at the measured noise level) and the '
-              'pressure difference varies by more than F_s (1 + phi_max) / A_p rms, b is the '
-              'model\'s error under a varying load: the position noise is q_x_offset, reported '
-              'as model_mismatch (adapt.offset_noise; 0: off)'),
+              'above this^2 x its stationary sigma^2 (at the measured noise level) under a '
+              'varying load, b is the model\'s error: reported as model_mismatch '
+              '(adapt.offset_noise; 0: off)'),
     Param(E + 'model.offset_time', 'float', 's', 0.5, 0.001, 100.0,
           doc='time constant of b\'s mean square'),
     Param(E + 'model.offset_load_mean', 'float', 's', 0.25, 0.001, 100.0,
@@ -139,9 +138,18 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.offset_load_time', 'float', 's', 2.0, 0.001, 100.0,
           doc='... and of its variance about that mean (a load step adds at most '
               'offset_load_mean/(2 offset_load_time) of its square: a held load is not varying)'),
-    Param(E + 'model.q_x_offset', 'float', 'm^2', 1e-10, 0.0, 1.0,
-          doc='per-step position noise while the offset is implausible under load: the '
-              'estimate follows the sensor at low frequency'),
+    Param(E + 'model.q_x_offset', 'float', 'm^2', 1e-9, 0.0, 1.0,
+          doc='per-step position noise under a varying load (the pressure difference varying by '
+              'more than F_s (1 + phi_max) / A_p rms about its mean: leakage and compressibility '
+              'flows the adaptive states get wrong integrate into a position error at low '
+              'frequency, which the sensor-offset state would otherwise take): the estimate '
+              'follows the sensor at low frequency (issue 42: stiffness at C_eq x10)'),
+    Param(E + 'model.hold_blend_time', 'float', 's', 0.2, 0.0, 100.0,
+          doc='while the piston rests (rest_velocity, rest_time) under a held load (the '
+              'pressure difference beyond F_s (1 + phi_max) / A_p and not varying) the published '
+              'position is the sensor\'s reading without its white noise, x_hat + b: nothing '
+              'observes b then, so the loop holds what the sensor reads (issue 42, decision 2); '
+              'b is blended in and out over this time (0: off, x_hat always)'),
     Param(E + 'model.adapt_gate', 'float', '', 4.0, 0.0, 1e6,
           doc='no update of the adaptive states from a sample whose |position innovation| / '
               'sqrt(S) exceeds this (0: always): a fast transient the model cannot explain '

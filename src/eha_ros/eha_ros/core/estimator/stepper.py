@@ -44,7 +44,8 @@ K_IFLOW = K_NL + noise_level.NNK
 K_QFLOW, K_FLOWK, K_FLOWN, K_FLOWDP, K_FLOWSH, K_FLOWREP = (K_IFLOW + i for i in range(1, 7))
 K_OFFG, K_QXO = K_FLOWREP + 1, K_FLOWREP + 2     # adapt.offset_noise: gate, position noise
 K_OFFA = K_QXO + 1     # 3 entries: its alphas (b, the pressure difference's mean, variance)
-K_FD = K_OFFA + 3      # fd.NFK entries: the fault detector's constants
+K_HOLDR = K_OFFA + 3   # per-tick rate of the published position's blend at rest under load
+K_FD = K_HOLDR + 1     # fd.NFK entries: the fault detector's constants
 NK = K_FD + fd.NFK
 # state
 E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES, E_MODE, E_WFRIC, E_EDGE = range(7)
@@ -58,7 +59,8 @@ E_NL = E_FS + adapt.NFS    # noise_level.NNS entries: the noise level's state
 E_FLOWN = E_NL + noise_level.NNS   # adapt.NFLOW entries: adapt.flow_noise's state
 E_OFFS = E_FLOWN + adapt.NFLOW    # adapt.NOFS entries: adapt.offset_noise's state
 E_FD = E_OFFS + adapt.NOFS        # fd.NFS entries: the fault detector's state
-NE = E_FD + fd.NFS
+E_HOLDW = E_FD + fd.NFS  # weight of b in the published position (:func:`published`)
+NE = E_HOLDW + 1
 E_CODE = E_FD + fd.FS_CODE
 
 
@@ -118,6 +120,7 @@ def pack(est):
     e[E_FLOWN:E_FLOWN + adapt.NFLOW] = est.flow_s
     k[K_OFFG], k[K_QXO] = est.offset_gate, est.q_x_offset
     k[K_OFFA:K_OFFA + 3] = est.offset_alpha
+    k[K_HOLDR] = est.hold_rate
     e[E_OFFS:E_OFFS + adapt.NOFS] = est.offset_s
     k[K_FD:K_FD + fd.NFK] = d.k
     e[E_FD:E_FD + fd.NFS] = d.s
@@ -320,7 +323,8 @@ def consistency(k, e, a, position) -> int:
     if k[K_CHAMBERS] > 0.5:
         adapt.disagree_noise(Q, x, int(k[K_IGM]), k[K_BDIS], k[K_MON:K_MON + adapt.NMK],
                              e[E_MON:E_MON + adapt.NMS], int(e[E_EDGE]), k[K_QX], k[K_QXD],
-                             offset, k[K_QXO])
+                             adapt.load_varying(e[E_OFFS:E_OFFS + adapt.NOFS], k[K_FLOWDP]),
+                             k[K_QXO])
     return v
 
 
@@ -375,9 +379,21 @@ def estimate(k, e, a, position, w, pa, pb):
                            k[K_OFFA + 2], k[K_OFFG], k[K_FLOWDP])
         rest = (k[K_STRIBECK] > 0.5 and e[E_FS + adapt.FS_N] >= k[K_FK + adapt.FK_NREST]
                 and not adapt.load_varying(of, k[K_FLOWDP]))
+        # at rest under a held load (beyond what friction holds): publish x_hat + b
+        r = k[K_HOLDR] if rest and abs(x[2] - x[3]) > k[K_FLOWDP] else -k[K_HOLDR]
+        e[E_HOLDW] = min(1.0, max(0.0, e[E_HOLDW] + r))
         adapt.flow_noise(
             Q, x, int(k[K_IFLOW]), int(k[K_IGM]), b_sigma, k[K_FLOWK], k[K_QFLOW], rest,
             e[E_FLOWN:E_FLOWN + adapt.NFLOW], k[K_FLOWN], k[K_FK:K_FK + adapt.NFK],
             k[K_FLOWDP], k[K_FLOWSH], k[K_FLOWREP])
     consistency(k, e, a, position)
-    return x[0], innov, nis, m, int(e[E_CODE])
+    return published(e, x, int(k[K_IGM])), innov, nis, m, int(e[E_CODE])
+
+
+@njit(cache=True)
+def published(e, x, i_gm) -> float:
+    """The position the estimate publishes: x_hat, and at rest under a held load (blended in
+    and out) x_hat + b, the sensor's reading without its white noise."""
+    if i_gm < 0:
+        return x[0]
+    return x[0] + e[E_HOLDW] * x[i_gm]

@@ -20,14 +20,7 @@ import time
 
 from ..config.cli import UsageError
 from ..io.report import write_json
-
-TUNING_SEEDS = tuple(range(1, 6))        # tuning (tune_estimator, gates, thresholds) reads these
-RECORD_SEEDS = tuple(range(101, 106))    # figures of record: seeds no tuning has read
-
-
-def seed_role(seed: int) -> str:
-    """'held-out' (a figure of record), 'tuning' or 'other'."""
-    return 'held-out' if seed in RECORD_SEEDS else 'tuning' if seed in TUNING_SEEDS else 'other'
+from .campaign import RECORD_SEEDS, TUNING_SEEDS, run_campaign, seed_role
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -56,7 +49,6 @@ def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=pri
     a folder that already holds a finished campaign is kept (reruns finish an interrupted
     set), an unfinished one is resumed. Returns the summary (also DIR/summary.json, .md)."""
     from . import scenarios as SC
-    from .campaign import run_campaign
     names = [SC.load(s).name for s in scenarios]         # unknown scenarios fail first
     if len(set(names)) != len(names):
         raise UsageError(f'scenarios {", ".join(scenarios)}: a scenario given twice')
