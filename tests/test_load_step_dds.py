@@ -26,11 +26,16 @@ def read_csv(path) -> dict:
     return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
 
 
+def run_stack(tmp_path, *args):
+    """scripts/run_stack in lock-step with the sweep's load step, as a user runs it."""
+    return subprocess.run([os.path.join(ROOT, 'scripts', 'run_stack'), '--mode', 'lockstep',
+                           '--sweep', '-p', 'sweep:sweep.mode:=load_step', '--out', str(tmp_path),
+                           '--name', 'ls', '--progress', '0', *args],
+                          capture_output=True, text=True, timeout=600)
+
+
 def test_load_step_over_dds_meets_the_decided_limits_and_agrees_with_batch(tmp_path):
-    res = subprocess.run([os.path.join(ROOT, 'scripts', 'run_stack'), '--mode', 'lockstep',
-                          '--sweep', '-p', 'sweep:sweep.mode:=load_step', '--out', str(tmp_path),
-                          '--name', 'ls', '--progress', '0'],
-                         capture_output=True, text=True, timeout=600)
+    res = run_stack(tmp_path)
     assert res.returncode == 0 and 'stopped (sweep finished)' in res.stdout, \
         res.stdout[-2000:] + res.stderr[-2000:]
     run = tmp_path / 'ls' / 'sweep'
@@ -76,3 +81,15 @@ def test_load_step_over_dds_meets_the_decided_limits_and_agrees_with_batch(tmp_p
     for key in figures:
         b = np.array([f[key] for f in batch])
         assert abs(s[key] - b.mean()) <= 4 * b.std(ddof=1) + 2e-6, (key, s[key], b)
+
+
+def test_load_step_without_the_truth_says_so_in_one_line(tmp_path):
+    """The hardware bridge (its mock backend: no physics, no /eha/sim/truth): the sweep does not
+    analyse the estimate instead; its summary is incomplete and run_stack's last line names
+    why."""
+    res = run_stack(tmp_path, '--plant', 'mock')
+    s = json.load(open(tmp_path / 'ls' / 'sweep' / 'summary.json'))
+    why = "the load step needs /eha/sim/truth (the simulator's ground truth)"
+    assert not s['complete'] and s['status'] == why and s['peak_deviation_m'] is None
+    assert res.returncode == 1 and 'Traceback' not in res.stdout + res.stderr
+    assert res.stderr.strip().splitlines()[-1].endswith(f'sweep incomplete: {why}'), res.stderr

@@ -157,6 +157,7 @@ class Sweep:
         print_table(summary, lambda line: self.get_logger().info(line))
         self.get_logger().info(f'report: {self.out}/ ({", ".join(self.session.files)})')
         if not summary['complete']:
+            self.get_logger().error(f'sweep incomplete: {summary["status"]}')   # the last line
             self.exit_code = 1
         if self.p['sweep.exit_when_done']:
             self.done = True
