@@ -238,6 +238,27 @@ def test_load_step_session_reports_the_campaign_figures(tmp_path, capsys):
     assert 'steady error (truth + sensor offset)' in out and out.strip().endswith('complete')
 
 
+@pytest.mark.parametrize('shift, words', [
+    (-200, 'a load reached the plant at 0.300 s, before the step planned at 0.5 s'),
+    (20, 'the load step reached the plant at 0.520 s, 20 ms after the plan: the run of 5 s '
+         'ends before its steady window'),
+])
+def test_a_load_step_off_its_plan_is_incomplete(tmp_path, shift, words):
+    """The step is where the truth reports it; one that reached the plant well before the plan
+    is not the sweep's, one so late that the run ends inside its steady window (a sweep lagging
+    behind the plant in real time) cannot give the decided figure: incomplete, one line."""
+    s = load_step_session(tmp_path)
+    s.start(0)
+    for k in range(s.n):
+        s.record('truth', k, 0.0)
+        s.record('sensor_offset', k, 0.0)
+        s.record('estimate', k, 0.0)
+        s.record('load', k, s.load_for(k - shift - 1))
+    summary = s.finish()
+    assert not summary['complete'] and summary['status'].startswith(words), summary['status']
+    assert '\n' not in summary['status'] and summary['steady_error_m'] is None
+
+
 def test_load_step_without_truth_is_incomplete_with_one_line(tmp_path, capsys):
     """A plant side without /eha/sim/truth (the hardware bridge): the figures are not taken
     from the estimate; the summary is incomplete and says why in one line."""

@@ -28,7 +28,7 @@ COLUMNS = ('reference', 'estimate', 'measured', 'truth', 'command', 'motor_speed
            'motor_speed_1', 'active_channel', 'load', 'sensor_offset')
 LOAD_STEP_FIGURES = ('peak_deviation_m', 'steady_error_m', 'steady_error_truth_m',
                      'estimate_error_m')
-STEP_SLACK_S = 0.1          # the load may reach the plant this far from the planned step
+EARLY_STEP_S = 0.1          # a load step reaching the plant earlier than planned by more: not ours
 
 
 def filled(y: np.ndarray, need: float = 0.95):
@@ -250,16 +250,20 @@ class SweepSession:
         if not len(on):
             return {}, 'the load step never reached the plant (/eha/sim/truth load_force)'
         t_step = (on[0] - 1) * self.Ts
-        if abs(t_step - planned) > STEP_SLACK_S:
-            return {}, (f'the load step reached the plant at {t_step:.3f} s, planned at '
-                        f'{planned:g} s (/eha/sim/truth load_force; another load source?)')
+        window = list(self.load_step['steady'])
+        if t_step < planned - EARLY_STEP_S:
+            return {}, (f'a load reached the plant at {t_step:.3f} s, before the step planned at '
+                        f'{planned:g} s (another source on /eha/sim/load_force?)')
+        if t_step + window[1] > n * self.Ts + 0.5 * self.Ts:
+            return {}, (f'the load step reached the plant at {t_step:.3f} s, '
+                        f'{(t_step - planned) * 1e3:.0f} ms after the plan: the run of '
+                        f'{n * self.Ts:g} s ends before its steady window (the sweep lagged behind '
+                        f'the plant; a longer sweep.load_step_duration covers it)')
         x = cols['truth'] - self.position
         sig = {'t': np.arange(n) * self.Ts, 'truth': x, 'sensor_lf': x + cols['sensor_offset'],
                'estimate': cols['estimate'] - self.position}
-        window = list(self.load_step['steady'])
         figs = load_step_figures(sig, {'t_step': t_step, 'steady': window}, self.Ts)
-        figs.update(step_time_s=float(t_step),
-                    steady_window_s=[window[0], min(window[1], n * self.Ts - t_step)])
+        figs['step_time_s'] = float(t_step)
         return figs, None
 
     # ---- outputs ----
