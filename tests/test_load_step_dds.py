@@ -53,8 +53,8 @@ def test_load_step_over_dds_meets_the_decided_limits_and_agrees_with_batch(tmp_p
     # the steady error is the sensor's reading without its white noise: truth + its
     # Gauss-Markov offset, which /eha/sim/truth carried to the sweep tick by tick
     d = read_csv(run / 'data.csv')
-    t_after = d['tick'] * 1e-3 - s['step_time_s']
-    w = (t_after >= s['steady_window_s'][0] - 1e-9) & (t_after <= s['steady_window_s'][1] + 1e-9)
+    t_after = d['tick'] * 1e-3 - s['step_time_s']                # as the figures' clock
+    w = (t_after >= s['steady_window_s'][0]) & (t_after <= s['steady_window_s'][1])
     assert w.sum() >= 999 and np.isfinite(d['sensor_offset'][w]).all()
     assert np.std(d['sensor_offset']) > 2e-6                    # a moving offset, not zeros
     assert s['steady_error_m'] == pytest.approx(
