@@ -91,6 +91,23 @@ def test_reproducible_noise_with_seed():
     assert xa == xb and xa != xc
 
 
+def test_truth_carries_the_sensor_offset_of_the_same_measurement():
+    """Truth.position_sensor_offset is the Gauss-Markov offset inside the measured position of
+    the same tick: without the white noise and the quantisation, measured = truth + offset
+    exactly, at reset and after every tick, across new noise blocks."""
+    from eha_ros.core.plant.sensors import BLOCK
+    plant = make_plant({'plant.sensors.position_sigma': 0.0,
+                        'plant.sensors.position_resolution': 0.0}, seed=5)
+    offsets = []
+    for k in range(BLOCK + 50):
+        if k:
+            plant.step(200.0 * math.sin(0.01 * k), 3e3)
+        m, tr = plant.measure(), plant.truth()
+        assert m.position == tr.position + tr.position_sensor_offset, k
+        offsets.append(tr.position_sensor_offset)
+    assert 5e-6 < np.std(offsets) < 50e-6              # the 20 um Gauss-Markov process
+
+
 def test_reset_and_new_noise_blocks_write_into_the_kernels_record():
     """The compiled step's arrays (EhaPlant.arrays, one record) are made with the plant: new
     noise blocks and reset() write into them, none can be replaced, and a plant reset after

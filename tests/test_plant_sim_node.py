@@ -258,6 +258,35 @@ def held_plant(ros_node, ns, *params):
     return proc, states
 
 
+def test_truth_carries_the_offset_inside_the_measured_position(ros_node):
+    """/eha/sim/truth(k).position_sensor_offset is the Gauss-Markov offset inside
+    /eha/state(k).position: with the white noise and the quantisation off, measured = truth +
+    offset exactly, tick by tick (lock-step, matched by seq)."""
+    from eha_msgs.msg import ActuatorCommand, PlantTruth
+    truths = {}
+    ros_node.create_subscription(PlantTruth, '/so/eha/sim/truth',
+                                 lambda m: truths.setdefault(m.seq, m), 100)
+    proc, states = held_plant(ros_node, '/so', '-p', 'plant.sensors.position_sigma:=0.0',
+                              '-p', 'plant.sensors.position_resolution:=0.0')
+    try:
+        pub = ros_node.create_publisher(ActuatorCommand, '/so/eha/command', 10)
+        wait_matched(pub)
+        for _ in range(300):             # until 30 ticks had their truth (discovery first)
+            seq = states[-1].seq
+            pub.publish(ActuatorCommand(seq=seq, motor_speed_ref=50.0))
+            assert wait_for(lambda: states[-1].seq == seq + 1, 5), f'no state after {seq}'
+            if sum(s.seq in truths for s in states) >= 30:
+                break
+        assert wait_for(lambda: states[-1].seq in truths, 5)
+    finally:
+        stop_process(proc)
+    pairs = [(s.position, truths[s.seq]) for s in states if s.seq in truths]
+    assert len(pairs) >= 30
+    assert all(x == t.position + t.position_sensor_offset for x, t in pairs)
+    assert len({t.position_sensor_offset for _, t in pairs}) == len(pairs)     # it moves
+    assert all(0 < abs(t.position_sensor_offset) < 1e-4 for _, t in pairs)
+
+
 def test_lockstep_start_waits_for_named_subscribers(ros_node):
     """sim_node.start_after (what run_stack --record sets for the recorder): tick 0
     is held until the named node subscribes to every /eha topic with a publisher."""

@@ -38,6 +38,9 @@ LOAD_PEAK_FACTOR = {'leaky': 1.35, 'tight': 1.25}
 # controller residual + the estimator's share of the batch test (10 um) + the 1 s mean of the
 # sensor's Gauss-Markov offset over DDS's own noise at 3 sigma (31.5 um; at 2 sigma, 21 um,
 # the limit failed about one run in 40 by its own construction).
+# Since issue 42 the figure (scenarios.load_step_figures' steady_error_m) is of truth + the
+# sensor's Gauss-Markov offset (PlantTruth.position_sensor_offset); the limits were set for the
+# truth alone and are kept (the truth's own error is printed beside).
 LOAD_STEADY_LIMIT = {'leaky': 20.2e-6 + 10e-6 + 31.5e-6, 'tight': 20e-6}
 TS = 1e-3
 
@@ -56,14 +59,17 @@ def plant_overrides(m: dict) -> list:
 class Bench:
     def __init__(self, node):
         from eha_msgs.msg import ExternalLoad, PlantTruth, PositionEstimate, PositionReference
-        self.truth, self.est = {}, {}
-        node.create_subscription(PlantTruth, '/eha/sim/truth',
-                                 lambda m: self.truth.__setitem__(m.seq, m.position), 2000)
+        self.truth, self.est, self.offset = {}, {}, {}
+        node.create_subscription(PlantTruth, '/eha/sim/truth', self.on_truth, 2000)
         node.create_subscription(PositionEstimate, '/eha/estimate',
                                  lambda m: self.est.__setitem__(m.seq, m.position), 2000)
         self.ref = node.create_publisher(PositionReference, '/eha/reference', 10)
         self.load = node.create_publisher(ExternalLoad, '/eha/sim/load_force', 10)
         self.Ref, self.Load = PositionReference, ExternalLoad
+
+    def on_truth(self, m):
+        self.offset[m.seq] = m.position_sensor_offset      # before the seq counts as arrived
+        self.truth[m.seq] = m.position
 
     @property
     def seq(self):
@@ -74,10 +80,13 @@ class Bench:
         assert wait_for(lambda: self.seq >= target, timeout), 'plant stalled'
 
     def signals(self, k0, k1, k_event):
-        """Truth and estimate of ticks k0 .. k1-1 as a campaign run's signals (time from
-        tick k0), for the campaign's own figure functions (core.sim.scenarios)."""
+        """Truth, the sensor without its white noise (truth + its Gauss-Markov offset) and
+        estimate of ticks k0 .. k1-1 as a campaign run's signals (time from tick k0), for the
+        campaign's own figure functions (core.sim.scenarios)."""
         ks = np.array([k for k in range(k0, k1) if k in self.truth])
-        return {'t': (ks - k0) * TS, 'truth': np.array([self.truth[k] for k in ks]),
+        x = np.array([self.truth[k] for k in ks])
+        return {'t': (ks - k0) * TS, 'truth': x,
+                'sensor_lf': x + np.array([self.offset[k] for k in ks]),
                 'estimate': np.array([self.est.get(k, np.nan) for k in ks])}, (k_event - k0) * TS
 
 
@@ -117,7 +126,8 @@ def test_corner_step_and_load_step_in_real_time(corner, ros_node):
         f = SC.load_step_figures(sig, dict(load, t_step=t_step), TS)
         peak, steady = f['peak_deviation_m'], f['steady_error_m']
         print(f'{corner} load step: peak {peak * 1e3:.3f} mm (linear loop {lin * 1e3:.3f} mm), '
-              f'steady {steady * 1e6:.1f} um')
+              f'steady {steady * 1e6:.1f} um (truth + sensor offset; the truth '
+              f'{f["steady_error_truth_m"] * 1e6:.1f} um)')
         assert steady <= LOAD_STEADY_LIMIT[corner]
         b.load.publish(b.Load(force=0.0))
         assert peak <= LOAD_PEAK_FACTOR[corner] * lin + 50e-6

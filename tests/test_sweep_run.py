@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from eha_ros.core.sweep.session import SweepSession
+from eha_ros.core.sweep.session import SweepSession, print_table
 from eha_ros.core.sweep.signals import SteppedSine
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -181,3 +181,105 @@ def test_main_job_sweeps_to_the_bandwidth_and_measures_stiffness(tmp_path):
     assert [r['freq_hz'] for r in s['stiffness']] == [1.0, 4.0, 7.0]
     assert s['stiffness_meets_bound'] and s['stiffness_min_kn_per_mm'] >= 49.0
     assert 'dynamic stiffness: min' in res.stdout
+
+
+def load_step_session(tmp_path, **over):
+    """A load_step session from the sweep's own parameters (config/ plus ``over``)."""
+    from eha_ros.core.sim.batch import node_params
+    from eha_ros.core.sweep.params import SCHEMA, build_plan
+    from eha_ros.core.sweep.session import from_params
+    over = {'mode': 'load_step', **over}
+    p = node_params('sweep', SCHEMA, overrides={f'sweep:sweep.{k}': v for k, v in over.items()})
+    plan = build_plan(p)
+    return from_params(p, plan, str(tmp_path), {'mode': 'load_step'}, background_writes=False)
+
+
+def test_load_step_session_reports_the_campaign_figures(tmp_path, capsys):
+    # synthetic run held at 2 mm: the loop holds the sensor without its white noise (truth +
+    # Gauss-Markov offset) near the reference, so the truth carries minus the offset; the
+    # load deflects it by a decaying bump. The plant's truth of tick k reports the load
+    # applied during tick k-1 -> k: the session puts the step one tick before that truth
+    from eha_ros.core.sim.scenarios import KINDS, load_step_figures
+    s = load_step_session(tmp_path, offset=2e-3)
+    n, Ts, seq0 = s.n, s.Ts, 1000
+    t = np.arange(n) * Ts
+    rng = np.random.default_rng(4)
+    off = 15e-6 + 5e-6 * np.sin(2 * np.pi * 0.3 * t)
+    after = np.clip(t - 0.5, 0.0, None)
+    bump = -150e-6 * after / 0.02 * np.exp(1 - after / 0.02) - 8e-6 * (after > 0)
+    truth = 2e-3 + bump - off
+    estimate = truth + off + 1e-6 * rng.standard_normal(n)
+    s.start(seq0)
+    loads = np.array([s.load_for(seq0 + k) for k in range(n)])
+    assert loads[499] == 0.0 and loads[500] == 5e3 and loads[-1] == 5e3
+    assert {s.reference_for(seq0 + k) for k in (0, 600, n - 1)} == {2e-3}
+    for k in range(n):
+        s.record('truth', seq0 + k, truth[k])
+        s.record('sensor_offset', seq0 + k, off[k])
+        s.record('estimate', seq0 + k, estimate[k])
+        s.record('load', seq0 + k, loads[k - 1] if k else 0.0)
+    summary = s.finish()
+    p = KINDS['load_step']
+    want = load_step_figures({'t': t, 'truth': truth - 2e-3, 'sensor_lf': truth + off - 2e-3,
+                              'estimate': estimate - 2e-3}, p, Ts)
+    assert summary['complete'] and summary['status'] == 'complete'
+    assert summary['analysis'] == 'load_step' and summary['output'] == 'truth'
+    assert summary['step_time_s'] == pytest.approx(p['t_step'])
+    assert summary['steady_window_s'] == pytest.approx(p['steady'])
+    for key, value in want.items():
+        assert summary[key] == pytest.approx(value, rel=1e-12), key
+    assert summary['peak_deviation_m'] == pytest.approx(150e-6 + 8e-6, abs=3e-6)
+    assert summary['steady_error_m'] == pytest.approx(8e-6, abs=0.1e-6)
+    assert summary['steady_error_truth_m'] > summary['steady_error_m'] + 5e-6
+    assert json.load(open(tmp_path / 'summary.json')) == json.loads(json.dumps(summary))
+    assert 'sensor_offset' in open(tmp_path / 'data.csv').readline()
+    print_table(summary)
+    out = capsys.readouterr().out
+    assert 'steady error (truth + sensor offset)' in out and out.strip().endswith('complete')
+
+
+@pytest.mark.parametrize('shift, words', [
+    (-200, 'a load reached the plant at 0.300 s, before the step planned at 0.5 s'),
+    (20, 'the load step reached the plant at 0.520 s, 20 ms after the plan: the run of 5 s '
+         'ends before its steady window'),
+])
+def test_a_load_step_off_its_plan_is_incomplete(tmp_path, shift, words):
+    """The step is where the truth reports it; one that reached the plant well before the plan
+    is not the sweep's, one so late that the run ends inside its steady window (a sweep lagging
+    behind the plant in real time) cannot give the decided figure: incomplete, one line."""
+    s = load_step_session(tmp_path)
+    s.start(0)
+    for k in range(s.n):
+        s.record('truth', k, 0.0)
+        s.record('sensor_offset', k, 0.0)
+        s.record('estimate', k, 0.0)
+        s.record('load', k, s.load_for(k - shift - 1))
+    summary = s.finish()
+    assert not summary['complete'] and summary['status'].startswith(words), summary['status']
+    assert '\n' not in summary['status'] and summary['steady_error_m'] is None
+
+
+def test_load_step_without_truth_is_incomplete_with_one_line(tmp_path, capsys):
+    """A plant side without /eha/sim/truth (the hardware bridge): the figures are not taken
+    from the estimate; the summary is incomplete and says why in one line."""
+    s = load_step_session(tmp_path)
+    s.start(0)
+    for k in range(s.n):
+        s.record('estimate', k, 1e-6)
+        s.record('measured', k, 1e-6)
+    summary = s.finish()
+    assert not summary['complete'] and summary['peak_deviation_m'] is None
+    assert summary['status'] == "the load step needs /eha/sim/truth (the simulator's ground truth)"
+    print_table(summary)
+    assert capsys.readouterr().out.strip().splitlines()[-1] == \
+        "load step: INCOMPLETE: the load step needs /eha/sim/truth (the simulator's ground truth)"
+
+
+def test_load_step_shorter_than_its_window_is_refused_in_one_line():
+    from eha_ros.core.config.params import ParamError
+    from eha_ros.core.sim.batch import node_params
+    from eha_ros.core.sweep.params import SCHEMA
+    with pytest.raises(ParamError) as err:
+        node_params('sweep', SCHEMA, overrides={'sweep:sweep.mode': 'load_step',
+                                                'sweep:sweep.load_step_duration': 4.9})
+    assert 'expected at least 5 s' in str(err.value) and '\n' not in str(err.value)

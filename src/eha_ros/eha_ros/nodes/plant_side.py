@@ -532,6 +532,7 @@ class PlantSide(LifecycleNodeMixin):
         t.pressure_acc = float(tr.pressure_acc)
         t.friction_force, t.load_force = float(tr.friction_force), float(tr.load_force)
         t.bypass_fraction = float(tr.bypass_fraction)
+        t.position_sensor_offset = float(tr.position_sensor_offset)
         speed, current, valve = t.motor_speed, t.motor_current, t.valve_fraction
         for i in (0, 1):
             speed[i] = tr.motor_speed[i]

@@ -4,7 +4,9 @@ analyses each finished frequency (appendix B.2) and writes out/<run>/ as it goes
 sine stops after the first frequency below -3 dB (sweep.stop_at_bandwidth). Mode stiffness:
 a stepped sine of the external load on eha/sim/load_force with the reference held at the
 offset; |F_L|/|x| per frequency against the bound of eq. 4.60 (the applied force is taken from
-eha/sim/truth).
+eha/sim/truth). Mode load_step: a step of the load force at 0.5 s with the reference held; the
+batch campaigns' load step figures from eha/sim/truth (position and the position sensor's
+Gauss-Markov offset) and eha/estimate.
 
 On each eha/state(k) it publishes the reference of tick k + lead_ticks stamped with that seq;
 the controller applies it when it handles tick k + lead_ticks, so the reference timing is exact
@@ -100,6 +102,7 @@ class Sweep:
     def on_truth(self, msg):
         self.session.record('truth', msg.seq, msg.position)
         self.session.record('load', msg.seq, msg.load_force)
+        self.session.record('sensor_offset', msg.seq, msg.position_sensor_offset)
 
     def on_estimate(self, msg):
         self.session.record('estimate', msg.seq, msg.position)
@@ -152,9 +155,9 @@ class Sweep:
         self.send(0, self.session.position)
         summary = self.session.finish(reason=reason)
         print_table(summary, lambda line: self.get_logger().info(line))
-        self.get_logger().info(f'report: {self.out}/ (summary.json, data.csv, '
-                               f'{"stiffness" if self.session.excite == "load" else "bode"}.png)')
+        self.get_logger().info(f'report: {self.out}/ ({", ".join(self.session.files)})')
         if not summary['complete']:
+            self.get_logger().error(f'sweep incomplete: {summary["status"]}')   # the last line
             self.exit_code = 1
         if self.p['sweep.exit_when_done']:
             self.done = True

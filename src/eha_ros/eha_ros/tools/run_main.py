@@ -123,7 +123,7 @@ def run_batch(args, p, plan, out) -> dict:
     import numpy as np
 
     from ..core.sim.batch import BatchStack
-    from ..core.sweep.session import from_params
+    from ..core.sweep.session import COLUMNS, from_params
     from ..nodes.sweep import model_overlay
     stack = BatchStack(args.config)
     model, ctl_file = model_overlay(p)
@@ -148,8 +148,7 @@ def run_batch(args, p, plan, out) -> dict:
                 if session.check_error(k0 + i, float(x_hat)):
                     done = i + 1
                     break
-            for col in ('reference', 'measured', 'estimate', 'truth', 'command',
-                        'motor_speed_0', 'motor_speed_1', 'active_channel', 'load'):
+            for col in COLUMNS:
                 session.record_many(col, k0, r[col][:done])
             if done < m:
                 break

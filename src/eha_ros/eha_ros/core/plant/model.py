@@ -54,6 +54,7 @@ class Truth:
     load_force: float
     valve_fraction: np.ndarray
     bypass_fraction: float
+    position_sensor_offset: float   # Gauss-Markov offset inside Measurement.position (S_GM)
 
 
 def _aux_flag(index: int, doc: str) -> property:
@@ -219,7 +220,7 @@ class EhaPlant:
             pressure_acc=float(S[L.S_PACC]), motor_speed=self._channel(L.C_W),
             motor_current=self._channel(L.C_I), friction_force=float(S[L.S_FF]),
             load_force=float(a.U[L.U_FL]), valve_fraction=self._channel(L.C_FV),
-            bypass_fraction=float(S[L.S_FB]))
+            bypass_fraction=float(S[L.S_FB]), position_sensor_offset=float(S[L.S_GM]))
 
     def _channel(self, offset):
         S = self.arrays.S

@@ -76,9 +76,10 @@ class BatchStack:
 
     def run(self, references, loads=None, fast: bool = True) -> dict:
         """Ticks self.k .. self.k + n - 1 for arrays of n references (and loads), what n
-        :meth:`tick` calls do, in compiled segments (BatchLoop): arrays named as Tick's fields
-        and 'load' (the loads applied)."""
-        from .closed_loop import R_CHANNEL, R_U, R_WM, R_X0, R_XHAT, R_XM
+        :meth:`tick` calls do, in compiled segments (BatchLoop): arrays named as Tick's fields,
+        'load' (the loads applied) and 'sensor_offset' (the position sensor's Gauss-Markov
+        offset in 'measured')."""
+        from .closed_loop import R_CHANNEL, R_GM, R_U, R_WM, R_X0, R_XHAT, R_XM
         refs = np.ascontiguousarray(references, dtype=float)
         loads = np.zeros_like(refs) if loads is None else np.ascontiguousarray(loads, dtype=float)
         rec = self.loop.run(refs, loads, fast=fast, k0=self.k).T
@@ -86,7 +87,8 @@ class BatchStack:
                'measured': rec[R_XM].copy(), 'estimate': rec[R_XHAT].copy(),
                'truth': rec[R_X0].copy(), 'command': rec[R_U].copy(),
                'motor_speed_0': rec[R_WM].copy(), 'motor_speed_1': rec[R_WM + 1].copy(),
-               'active_channel': rec[R_CHANNEL].astype(int), 'load': loads.copy()}
+               'active_channel': rec[R_CHANNEL].astype(int), 'load': loads.copy(),
+               'sensor_offset': rec[R_GM].copy()}
         self.k += len(refs)
         return out
 

@@ -131,6 +131,17 @@ def linear_columns(scn, fam: dict, nominal: dict, config_dir: str | None = None)
             for k, v in out.items()}
 
 
+def plant_limits(scn, multipliers: dict, nominal: dict | None = None,
+                 config_dir: str | None = None) -> tuple[dict, dict]:
+    """The scenario's spec limits on ONE plant (multipliers of core.sim.family.COLUMNS, a
+    missing one nominal), as a campaign judges that plant: ({metric: ('max' | 'min', limit)},
+    its linear columns (linear_columns) the relative specs resolve against)."""
+    nominal = nominal_params(config_dir) if nominal is None else nominal
+    fam = {c: np.array([float(multipliers.get(c, 1.0))]) for c in MULT}
+    lin = {k: v[0].item() for k, v in linear_columns(scn, fam, nominal, config_dir).items()}
+    return {m: SC.limit(spec, lin) for m, spec in scn.specs.items()}, lin
+
+
 # ------------------------------------------------------------------------------ engine
 def _free_port(port: int) -> bool:
     with socket.socket() as s:

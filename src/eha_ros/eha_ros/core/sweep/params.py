@@ -5,8 +5,10 @@ from ..config.params import Param, ParamError, Schema
 from ..plant.parameters import PLANT_SCHEMA
 
 NODE = Schema('sweep', [
-    Param('sweep.mode', 'str', '', 'stepped', choices=('stepped', 'chirp', 'step', 'stiffness'),
-          doc='stiffness: stepped sine of the external load force, reference held at the offset'),
+    Param('sweep.mode', 'str', '', 'stepped',
+          choices=('stepped', 'chirp', 'step', 'stiffness', 'load_step'),
+          doc='stiffness: stepped sine of the external load force, reference held at the '
+              'offset; load_step: a step of the load force at 0.5 s, reference held'),
     Param('sweep.amplitude', 'float', 'm', 1e-3, 1e-6, 0.12, doc='sine/chirp amplitude or step size'),
     Param('sweep.offset', 'float', 'm', 0.0, -0.12, 0.12, doc='position the signal is centred on'),
     Param('sweep.start_hz', 'float', 'Hz', 1.0, 0.01, 1000.0, doc='Fr_Test starting_freq'),
@@ -22,7 +24,7 @@ NODE = Schema('sweep', [
     Param('sweep.settle_periods', 'int', '', 2, 0, 100, doc='periods skipped by the analysis'),
     Param('sweep.relax_s', 'float', 's', 0.3, -100.0, 60.0, doc='Fr_Test freq_interval (rest)'),
     Param('sweep.load_amplitude', 'float', 'N', 5000.0, 1.0, 200000.0,
-          doc='stiffness: load force amplitude on eha/sim/load_force'),
+          doc='stiffness, load_step: load force amplitude (step size) on eha/sim/load_force'),
     Param('sweep.stiffness_freqs', 'float[]', 'Hz', [1.0, 4.0, 7.0], 0.01, 1000.0, min_len=1,
           doc='stiffness: load frequencies (eq. 4.60 is checked up to 7 Hz)'),
     Param('sweep.chirp_f0', 'float', 'Hz', 0.5, 0.01, 1000.0),
@@ -30,6 +32,9 @@ NODE = Schema('sweep', [
     Param('sweep.chirp_duration', 'float', 's', 30.0, 0.1, 3600.0),
     Param('sweep.chirp_fade', 'float', 's', 0.5, 0.0, 60.0),
     Param('sweep.step_duration', 'float', 's', 2.0, 0.05, 3600.0),
+    Param('sweep.load_step_duration', 'float', 's', 5.0, 0.05, 3600.0,
+          doc='load_step: run length; at least the step (0.5 s) plus the end of the steady '
+              'window (4.5 s after it)'),
     Param('sweep.lead_ticks', 'int', '', 2, 1, 100,
           doc='references are sent this many ticks ahead, stamped with their tick'),
     Param('sweep.start_delay', 'float', 's', 1.0, 0.0, 600.0,
@@ -50,7 +55,8 @@ NODE = Schema('sweep', [
 
 def build_plan(p: dict):
     """The signal plan from validated parameters; one-line UsageError for unusable values."""
-    from .signals import Chirp, Step, SteppedSine, check_sweep, check_limits
+    from .signals import (Chirp, Step, SteppedSine, check_limits, check_load_step,
+                          check_sweep)
     Ts = p['plant.sim.Ts']
     stroke = p['plant.cylinder.stroke']
     if p['sweep.mode'] == 'stepped':
@@ -67,6 +73,12 @@ def build_plan(p: dict):
                     settle_periods=p['sweep.settle_periods'])
         return SteppedSine(0.0, 0.0, 0.0, p['sweep.periods'], p['sweep.relax_s'],
                            p['sweep.load_amplitude'], 0.0, Ts, tuple(freqs))
+    if p['sweep.mode'] == 'load_step':
+        from ..sim.scenarios import KINDS
+        t_step, window = KINDS['load_step']['t_step'], KINDS['load_step']['steady']
+        check_load_step(p['sweep.load_step_duration'], t_step, window[1], p['sweep.offset'],
+                        stroke)
+        return Step(p['sweep.load_amplitude'], p['sweep.load_step_duration'], t_step, 0.0, Ts)
     if p['sweep.mode'] == 'chirp':
         check_limits(p['sweep.chirp_f1'], p['sweep.amplitude'], p['sweep.offset'], stroke, Ts)
         return Chirp(p['sweep.chirp_f0'], p['sweep.chirp_f1'], p['sweep.chirp_duration'],

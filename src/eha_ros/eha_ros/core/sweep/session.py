@@ -7,6 +7,9 @@ produce the same summary.json (contract: bandwidth_hz, phase_at_7hz_deg, points[
 sine of the reference stops after the first frequency below -3 dB when asked (stop_at_db): the
 bandwidth is then bracketed by the last two points. A stiffness run (excite='load') drives the
 load force with the plan, holds the reference, and reports |F_L|/|x| per frequency (eq. 4.60).
+A load step (excite='load' with a step plan and ``load_step``) reports the figures of the batch
+campaigns' load_step scenario (core.sim.scenarios.load_step_figures) from the recorded truth,
+the position sensor's Gauss-Markov offset and the estimate.
 """
 from __future__ import annotations
 
@@ -22,7 +25,22 @@ from .analysis import (BANDWIDTH_DB, sine_point, stiffness_kn_per_mm, stiffness_
                        summarize)
 
 COLUMNS = ('reference', 'estimate', 'measured', 'truth', 'command', 'motor_speed_0',
-           'motor_speed_1', 'active_channel', 'load')
+           'motor_speed_1', 'active_channel', 'load', 'sensor_offset')
+LOAD_STEP_FIGURES = ('peak_deviation_m', 'steady_error_m', 'steady_error_truth_m',
+                     'estimate_error_m')
+EARLY_STEP_S = 0.1          # a load step reaching the plant earlier than planned by more: not ours
+
+
+def filled(y: np.ndarray, need: float = 0.95):
+    """y with its missing (non-finite) samples interpolated, or None when fewer than ``need``
+    of them are there."""
+    ok = np.isfinite(y)
+    if not len(y) or ok.mean() < need:
+        return None
+    if ok.all():
+        return y
+    idx = np.arange(len(y))
+    return np.interp(idx, idx[ok], y[ok])
 
 
 class Writer:
@@ -64,15 +82,21 @@ class SweepSession:
 
     excite: 'reference' (the plan is the position reference) or 'load' (the plan is the
     external load force in N, the reference stays at ``position``). stop_at_db: end a stepped
-    sine after the first point below this gain (None: run every frequency)."""
+    sine after the first point below this gain (None: run every frequency). load_step: the
+    load_step scenario's t_step and steady window (core.sim.scenarios.KINDS) for a load run
+    whose plan is a signals.Step: the summary holds its figures (LOAD_STEP_FIGURES)."""
 
     def __init__(self, plan, out_dir: str, meta: dict, output: str = 'auto',
                  abort_error: float = math.inf, abort_ticks: int = 20, model=None,
                  background_writes: bool = True, settle_periods: int = 2,
                  excite: str = 'reference', position: float = 0.0, stop_at_db=None,
-                 stiffness_bound=None):
+                 stiffness_bound=None, load_step: dict | None = None):
         if excite not in ('reference', 'load'):
             raise ValueError(f'excite {excite!r}: expected reference or load')
+        if load_step is not None and excite != 'load':
+            raise ValueError('load_step: expected excite=load (the plan is the load force)')
+        self.load_step = load_step
+        self.step_figures: dict = {}             # load_step: figures, once the run finished
         self.plan = plan
         self.n = plan.n_ticks
         self.end = self.n                      # ticks that run (an early stop shortens it)
@@ -191,6 +215,8 @@ class SweepSession:
                 f'coherence {point.coherence:.4f}')
 
     def output_column(self, sl=slice(None)) -> str:
+        if self.load_step is not None:
+            return 'truth'                         # the figures are defined on the truth
         if self.output != 'auto':
             return self.output
         return 'truth' if np.isfinite(self.data['truth'][sl]).mean() > 0.9 else 'estimate'
@@ -201,15 +227,53 @@ class SweepSession:
         u, y = self.ref[sl], self.data[col][sl]
         if self.excite == 'load' and np.isfinite(self.data['load'][sl]).all():
             u = self.data['load'][sl]              # the force the plant applied (its truth)
-        ok = np.isfinite(y)
-        if ok.mean() < 0.95:
+        y = filled(y)
+        if y is None:
             return None                            # too much missing: no point, not a wrong one
-        if not ok.all():
-            idx = np.arange(len(y))
-            y = np.interp(idx, idx[ok], y[ok])
         return sine_point(u, y, seg.freq_hz, self.Ts, self.settle)
 
+    def _analyse_load_step(self) -> tuple[dict, str | None]:
+        """(figures, None) of a finished load step, or ({}, why not). The figures are the batch
+        campaigns' (core.sim.scenarios.load_step_figures) with the held position as 0, the
+        step where the truth first reports the load minus one tick (the batch record's truth
+        is the state at the start of a tick, the load acts during it)."""
+        from ..sim.scenarios import load_step_figures
+        n, d = self.n_run, self.data
+        if not np.isfinite(d['truth'][:n]).any():
+            return {}, 'the load step needs /eha/sim/truth (the simulator\'s ground truth)'
+        cols = {c: filled(d[c][:n]) for c in ('truth', 'sensor_offset', 'estimate', 'load')}
+        missing = [c for c, v in cols.items() if v is None]
+        if missing:
+            return {}, f'{", ".join(missing)}: recorded on fewer than 95 % of the ticks'
+        planned = self.load_step['t_step']
+        on = np.nonzero(np.abs(cols['load']) >= 0.5 * abs(self.plan.amplitude))[0]
+        if not len(on):
+            return {}, 'the load step never reached the plant (/eha/sim/truth load_force)'
+        t_step = (on[0] - 1) * self.Ts
+        window = list(self.load_step['steady'])
+        if t_step < planned - EARLY_STEP_S:
+            return {}, (f'a load reached the plant at {t_step:.3f} s, before the step planned at '
+                        f'{planned:g} s (another source on /eha/sim/load_force?)')
+        if t_step + window[1] > n * self.Ts + 0.5 * self.Ts:
+            return {}, (f'the load step reached the plant at {t_step:.3f} s, '
+                        f'{(t_step - planned) * 1e3:.0f} ms after the plan: the run of '
+                        f'{n * self.Ts:g} s ends before its steady window (the sweep lagged behind '
+                        f'the plant; a longer sweep.load_step_duration covers it)')
+        x = cols['truth'] - self.position
+        sig = {'t': np.arange(n) * self.Ts, 'truth': x, 'sensor_lf': x + cols['sensor_offset'],
+               'estimate': cols['estimate'] - self.position}
+        figs = load_step_figures(sig, {'t_step': t_step, 'steady': window}, self.Ts)
+        figs['step_time_s'] = float(t_step)
+        return figs, None
+
     # ---- outputs ----
+    @property
+    def files(self) -> list[str]:
+        """What the run writes into its folder (besides data/)."""
+        plot = [] if self.load_step is not None else \
+            ['stiffness.png' if self.excite == 'load' else 'bode.png']
+        return ['summary.json', 'data.csv'] + plot
+
     def _write_segment(self, i, seg):
         sl = slice(seg.relax_start, seg.stop)
         cols = {'tick': np.arange(sl.start, sl.stop), **{c: self.data[c][sl] for c in COLUMNS}}
@@ -223,7 +287,15 @@ class SweepSession:
         if self.excite == 'load':                # x/F in m/N: no bandwidth, no tracking phase
             s.update(bandwidth_hz=None, phase_at_7hz_deg=None, peak_gain_db=None,
                      peak_gain_freq_hz=None)
-            s.update(stiffness_summary(self.points, self.stiffness_bound))
+        if self.load_step is not None:
+            s.update({k: None for k in LOAD_STEP_FIGURES}, analysis='load_step',
+                     load_n=float(self.plan.amplitude), step_time_s=None,
+                     steady_window_s=list(self.load_step['steady']))
+            s.update(self.step_figures)
+        elif self.excite == 'load':
+            s.update(stiffness_summary(self.points, self.stiffness_bound), analysis='stiffness')
+        else:
+            s['analysis'] = 'frequency_response'
         s.update(self.meta)
         return s
 
@@ -239,8 +311,12 @@ class SweepSession:
         segs = getattr(self.plan, 'segments', [])
         if self.stopped_early:
             segs = segs[:self.next_segment]
+        why = None
+        if self.load_step is not None and reason is None and self.aborted is None:
+            self.step_figures, why = self._analyse_load_step()
         if complete is None:
-            complete = self.aborted is None and len(self.points) == len(segs)
+            complete = self.aborted is None and len(self.points) == len(segs) and why is None
+        reason = reason or why
         if reason is None and self.aborted is None and not complete:
             reason = (f'{len(self.points)} of {len(segs)} frequencies measured (the others had '
                       f'too little data)')
@@ -250,7 +326,7 @@ class SweepSession:
         cols = {'tick': np.arange(self.n), **self.data}
         self.writer.submit(write_csv, os.path.join(self.out, 'data.csv'), cols)
         if self.points and self.excite == 'load':
-            self.writer.submit(stiffness_png, os.path.join(self.out, 'stiffness.png'),
+            self.writer.submit(stiffness_png, os.path.join(self.out, self.files[-1]),
                                summary['stiffness'], f'dynamic stiffness |F_L|/|x| '
                                f'({summary["output"]}), {"complete" if complete else reason}')
         elif self.points:
@@ -260,7 +336,7 @@ class SweepSession:
                                 np.log10(max(p.freq_hz for p in self.points) * 1.2), 200)
                 model = (f, *self.model(f))
             title = f'closed loop x/x_ref ({summary["output"]}), {"complete" if complete else reason}'
-            self.writer.submit(bode_png, os.path.join(self.out, 'bode.png'), summary['points'],
+            self.writer.submit(bode_png, os.path.join(self.out, self.files[-1]), summary['points'],
                                model, title)
         self.writer.close()
         self.finished = True
@@ -270,18 +346,40 @@ class SweepSession:
 def from_params(p: dict, plan, out: str, meta: dict, model=None, **kw):
     """The SweepSession of validated sweep parameters (node and batch run alike)."""
     from .analysis import stiffness_bound
-    load = p['sweep.mode'] == 'stiffness'
+    from ..sim.scenarios import KINDS
+    stiff, step = p['sweep.mode'] == 'stiffness', p['sweep.mode'] == 'load_step'
+    load = stiff or step
     return SweepSession(plan, out, meta, p['sweep.output'], p['sweep.abort_error'],
                         p['sweep.abort_ticks'], None if load else model,
                         settle_periods=p['sweep.settle_periods'],
                         excite='load' if load else 'reference', position=p['sweep.offset'],
                         stop_at_db=BANDWIDTH_DB if p['sweep.stop_at_bandwidth'] and
                         p['sweep.mode'] == 'stepped' else None,
-                        stiffness_bound=stiffness_bound() if load else None, **kw)
+                        stiffness_bound=stiffness_bound() if stiff else None,
+                        load_step={k: KINDS['load_step'][k] for k in ('t_step', 'steady')}
+                        if step else None, **kw)
+
+
+def _um(value) -> str:
+    return 'n/a' if value is None else f'{value * 1e6:.1f} um'
 
 
 def print_table(summary: dict, out=print):
     """The summary table scripts/run prints."""
+    state = 'complete' if summary['complete'] else 'INCOMPLETE: ' + summary['status']
+    if summary.get('analysis') == 'load_step':
+        w = summary.get('steady_window_s')
+        out(f'load step of {summary["load_n"] / 1e3:g} kN'
+            + ('' if summary.get('step_time_s') is None else
+               f' at {summary["step_time_s"]:.3f} s') + ', reference held'
+            + ('' if w is None else f'; steady window {w[0]:g}-{w[1]:g} s after the step'))
+        for key, text in (('peak_deviation_m', 'peak deviation |x - x_before| (truth)'),
+                          ('steady_error_m', 'steady error (truth + sensor offset)'),
+                          ('steady_error_truth_m', 'steady error of the truth alone'),
+                          ('estimate_error_m', 'estimate error (estimate - truth)')):
+            out(f'  {text:40} {_um(summary.get(key)):>10}')
+        out(f'load step: {state}')
+        return
     if summary.get('excite') == 'load':
         out(f'{"freq [Hz]":>10} {"|F|/|x| [kN/mm]":>16} {"1/|M| [kN/mm]":>14} {"coherence":>10}')
         for p, k in zip(summary['points'], summary['stiffness']):
@@ -292,7 +390,7 @@ def print_table(summary: dict, out=print):
         out(f'dynamic stiffness: min {"n/a" if low is None else "%.1f kN/mm" % low}'
             + ('' if ratio is None else f', {ratio:.2f} x the eq. 4.60 bound 1/|M| '
                f'({"met" if summary["stiffness_meets_bound"] else "NOT met"})')
-            + f'; {"complete" if summary["complete"] else "INCOMPLETE: " + summary["status"]}')
+            + f'; {state}')
         return
     out(f'{"freq [Hz]":>10} {"gain [dB]":>10} {"phase [deg]":>12} {"coherence":>10}')
     for p in summary['points']:
@@ -302,4 +400,4 @@ def print_table(summary: dict, out=print):
     top = max((p['freq_hz'] for p in summary['points']), default=0)
     out(f'bandwidth (-3 dB): {"above %g Hz (not reached)" % top if bw is None else "%.2f Hz" % bw}'
         f'; phase at 7 Hz: {"n/a" if ph7 is None else "%.1f deg" % ph7}'
-        f'; {"complete" if summary["complete"] else "INCOMPLETE: " + summary["status"]}')
+        f'; {state}')

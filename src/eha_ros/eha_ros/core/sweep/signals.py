@@ -1,4 +1,5 @@
-"""Test reference signals: stepped sine like the TwinCAT Fr_Test block (appendix B.1), chirp, step.
+"""Test signals: stepped sine like the TwinCAT Fr_Test block (appendix B.1), chirp, step (of the
+reference, or of the load force for a load step).
 
 Each signal is a plan that maps a tick index to a reference, so a node (one tick at a time)
 and batch code (whole arrays) produce the identical signal.
@@ -165,6 +166,22 @@ def check_limits(max_hz, amplitude, offset, stroke, Ts, margin=0.005):
                          f'Ts = {Ts:g} s: expected at most {nyq / 10:g} Hz')
     if amplitude <= 0:
         raise UsageError(f'amplitude {amplitude} m: expected > 0')
+    check_reach(amplitude, offset, stroke, margin)
+
+
+def check_load_step(duration_s, t_step_s, window_end_s, offset, stroke, margin=0.005):
+    """A load step run long enough for its steady window (``window_end_s`` after the step at
+    ``t_step_s``), held at an offset inside the stroke minus a margin."""
+    need = t_step_s + window_end_s
+    if duration_s < need - 1e-9:
+        raise UsageError(f'load step run of {duration_s:g} s (sweep.load_step_duration): '
+                         f'expected at least {need:g} s, the step at {t_step_s:g} s plus the '
+                         f'end of the steady window {window_end_s:g} s after it')
+    check_reach(0.0, offset, stroke, margin)
+
+
+def check_reach(amplitude, offset, stroke, margin=0.005):
+    """amplitude + offset inside the stroke minus a margin."""
     reach = abs(offset) + amplitude
     limit = stroke / 2 - margin
     if reach > limit:
