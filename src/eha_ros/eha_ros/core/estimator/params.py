@@ -138,7 +138,7 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.offset_load_time', 'float', 's', 2.0, 0.001, 100.0,
           doc='... and of its variance about that mean (a load step adds at most '
               'offset_load_mean/(2 offset_load_time) of its square: a held load is not varying)'),
-    Param(E + 'model.q_x_offset', 'float', 'm^2', 1e-9, 0.0, 1.0,
+    Param(E + 'model.q_x_offset', 'float', 'm^2', 3e-10, 0.0, 1.0,
           doc='per-step position noise under a varying load (the pressure difference varying by '
               'more than F_s (1 + phi_max) / A_p rms about its mean: leakage and compressibility '
               'flows the adaptive states get wrong integrate into a position error at low '
