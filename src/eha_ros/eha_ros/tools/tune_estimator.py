@@ -1,6 +1,10 @@
 """tune_estimator: derive the estimator's adaptive-state noise, projection ranges, sensor band
 and jump step from the Table 4.5 family and the sensor model (core.estimator.tuning), print
-them, and with --write put them into config/estimator.yaml (comments kept)."""
+them, and with --write put them into config/estimator.yaml (comments kept).
+
+It reads no noise seed. A tuning is checked with campaigns on the tuning seeds 1-5
+(scripts/campaign ... --seeds tuning); the figures of record come from the held-out seeds
+101-105, which no tuning reads (docs/measurements.md, "Tuning seeds and figures of record")."""
 from __future__ import annotations
 
 import argparse
@@ -18,7 +22,8 @@ PROG = 'tune_estimator'
 
 
 def parse(argv):
-    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
+    head, seeds = (part.replace('\n', ' ') for part in __doc__.split('\n\n'))
+    ap = argparse.ArgumentParser(prog=PROG, description=head, epilog=seeds)
     cfg = default_config_dir()
     ap.add_argument('--spec', default=os.path.join(cfg, 'qft_spec.yaml'),
                     help='family ranges (family.*_range), default config/qft_spec.yaml')

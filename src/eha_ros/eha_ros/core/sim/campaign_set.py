@@ -163,7 +163,8 @@ def markdown(summary: dict) -> list[str]:
         if not s['failures']:
             continue
         md += [f'## {name}: {len(s["failures"])} failing runs', '',
-               '| seed | run | failed specs | values | plant (x nominal) |', '|---|---|---|---|---|']
+               '| seed | run | failed specs | values | plant (x nominal) |',
+               '|---|---|---|---|---|']
         for f in s['failures']:
             vals = ', '.join(f'{m} {fmt(m, v)}' for m, v in f['values'].items() if v is not None)
             plant = ' '.join(f'{c}={v:.3g}' for c, v in f['plant'].items() if v != 1.0)
