@@ -26,6 +26,8 @@ V_MIN = 0.004           # [m/s] slower samples are left out (sticking)
 FITTED = ('F_c', 'F_s', 'v_s', 'mu')
 STRIBECK = 2            # core.plant.friction's model code for eq. 3.33
 BINS = 60               # velocity bins of the figure's averages
+MODEL_ERROR = 0.06      # relative half-width added to the intervals: the filter rounds the
+                        # Stribeck hump (v_s +5 %, F_c -2 % on the plant's own recordings)
 MIN_SAMPLES = 500       # fewer usable samples: nothing is fitted
 RINGING = 3.0           # samples whose pressure-force ringing exceeds this x its median: out
 
@@ -71,7 +73,8 @@ def identify(rec, p, log=print) -> dict:
 
     fit = least_squares_fit(residual, np.ones(4), FITTED, [1e-3] * 4, [50.0] * 4,
                             np.nonzero(keep)[0] // 250)
-    est = {f'friction.{n}': fit.estimate(n, getattr(p, n), getattr(p, n)) for n in FITTED}
+    est = {f'friction.{n}': fit.estimate(n, getattr(p, n), getattr(p, n), floor=MODEL_ERROR)
+           for n in FITTED}
     c = fit.x * nominal
     log(f'identify: friction: F_c {c[0]:.0f} N, F_s {c[1]:.0f} N, v_s {c[2] * 1e3:.1f} mm/s, '
         f'mu {c[3]:.0f} N s/m ({len(vk)} samples up to {np.max(np.abs(vk)):.3f} m/s, force '
