@@ -55,8 +55,7 @@ def test_changed_parameters_recovered_within_the_issue_tolerances(identified):
     params = result['parameters']
     for key, e in sorted(params.items()):
         print(f'{key:14s} {e["value"]:.5g} [{e["ci_low"]}, {e["ci_high"]}] truth '
-              f'{truth(key) if key in TOLERANCE or key.startswith(("friction", "pump", "cyl")) else "-"}'
-              f' identified {e["identified"]}')
+              f'{truth(key)} identified {e["identified"]}')
     for key, (rel, absolute) in TOLERANCE.items():
         e, true = params[key], truth(key)
         if key in ('C_eq', 'friction.F_c', 'drive.Kp_w', 'drive.Ki_w', 'drive.delay',
