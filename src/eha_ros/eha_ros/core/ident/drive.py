@@ -105,12 +105,12 @@ def identify(rec, p: PlantParams, log=print) -> dict:
 
     groups = np.tile(np.arange(n) // GROUP, 2)         # a speed and its current together
 
-    def solve(delay, x0):
+    def solve(delay, x0, most=400):
         return least_squares_fit(residual_for(delay), x0, FITTED, [0.05] * 3, [20.0] * 3,
-                                 groups)
+                                 groups, most)
 
     d0 = min(p.delay_ticks, MAX_DELAY)
-    first = solve(d0, np.ones(3))
+    first = solve(d0, np.ones(3), 8)         # rough: only the blocks' weights come from it
     r = residual_for(d0)(first.x)
     scale = [scale[0] * max(np.sqrt(np.mean(r[blocks[0]] ** 2)), 1e-12),
              scale[1] * max(np.sqrt(np.mean(r[blocks[1]] ** 2)), 1e-12)]

@@ -98,14 +98,15 @@ class Fit:
 
 def least_squares_fit(residual: Callable[[np.ndarray], np.ndarray], x0: Sequence[float],
                       names: Sequence[str], lower: Sequence[float], upper: Sequence[float],
-                      groups: np.ndarray | None = None) -> Fit:
+                      groups: np.ndarray | None = None, max_nfev: int = 400) -> Fit:
     """Minimise sum residual(x)^2 within bounds (trust-region reflective, 2-point Jacobian);
     x is best scaled near 1 (multipliers of nominal values). ``groups``: the cluster of each
-    residual (default: runs of GROUP samples)."""
+    residual (default: runs of GROUP samples); ``max_nfev``: evaluations at most (a rough
+    first solution)."""
     from scipy.optimize import least_squares
     t0 = time.perf_counter()
     res = least_squares(residual, np.asarray(x0, float), bounds=(lower, upper), method='trf',
-                        x_scale='jac', xtol=1e-8, ftol=1e-9, gtol=1e-9, max_nfev=400)
+                        x_scale='jac', xtol=1e-8, ftol=1e-9, gtol=1e-9, max_nfev=max_nfev)
     J, r = res.jac, res.fun
     n, p = len(r), len(res.x)
     if groups is None:
