@@ -38,8 +38,7 @@ def changed_keys(params: dict, values: dict) -> dict:
         e = params.get(key)
         split = key in ('pump.C_p', 'cylinder.C_c', 'pump.C_r') and params['C_eq'].identified
         if e is not None and (e.identified or split):
-            out['plant.' + key] = round(e.value / 1e-3) * 1e-3 if key == 'drive.delay' \
-                else float(e.value)
+            out['plant.' + key] = float(e.value)       # drive.delay: whole ticks already
     for key in ('plant.friction.F_s', 'plant.friction.F_c'):   # F_s >= F_c (eq. 3.33) et al.
         try:
             PlantParams.from_dict({**values, **out})
