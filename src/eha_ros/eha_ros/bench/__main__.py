@@ -1,4 +1,5 @@
-"""scripts/bench <name> [--out DIR] [--duration S]: run a benchmark, write out/bench/<name>.json."""
+"""scripts/bench <name> [--out DIR] [--duration S] [--recordings PATH...]: run a benchmark,
+write out/bench/<name>.json."""
 from __future__ import annotations
 
 import argparse
@@ -26,6 +27,8 @@ def main(argv=None) -> int:
     ap.add_argument('--out', default='out/bench', help='output folder (default out/bench)')
     ap.add_argument('--duration', type=float, default=None,
                     help='measurement length in seconds where the benchmark has one')
+    ap.add_argument('--recordings', nargs='+', default=None, metavar='PATH',
+                    help='recordings for the benchmarks that fit them (identify)')
     args = ap.parse_args(argv)
 
     def run():

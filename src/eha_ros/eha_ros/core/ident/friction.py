@@ -1,0 +1,99 @@
+"""Piston friction, thesis sec. 3.6.3 (Fig. 3.40-3.42, Table 3.7): eq. 3.33's F_c, F_s, v_s
+and mu fitted to the force the chamber pressures give, A_p (p_A - p_B) - F_L - m_p a (eq. 3.32),
+against the piston velocity, the curve being the plant's own (core.plant.friction).
+
+Velocity and acceleration are Savitzky-Golay derivatives of the measured position (cubic,
+WINDOW ticks: the sensor's 10 um noise becomes about 0.3 mm/s), and the force is smoothed by the
+same filter: the chamber pressures carry the hydraulic resonance (about 760 Hz, above the 500 Hz
+Nyquist frequency of the ticks, so it shows aliased), which is not friction. Where that
+oscillation is large (the local RMS of the force's high-pass above RINGING times its median
+over the recording: the loop excites the mode at high speeds on a lightly damped plant) the
+samples are left out: the friction there is an average over the oscillation, not the force at
+the smoothed velocity. Samples slower than V_MIN are
+left out: there the piston sticks and the pressure force is whatever the loop holds, not the
+velocity's friction (eq. 3.33 is regularised at v_s/10 and says nothing about sticking).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..plant.friction import friction
+from .fit import least_squares_fit
+
+WINDOW = 21             # [ticks] Savitzky-Golay window of the position derivatives
+V_MIN = 0.004           # [m/s] slower samples are left out (sticking)
+FITTED = ('F_c', 'F_s', 'v_s', 'mu')
+STRIBECK = 2            # core.plant.friction's model code for eq. 3.33
+BINS = 60               # velocity bins of the figure's averages
+MODEL_ERROR = 0.06      # relative half-width added to the intervals: the filter rounds the
+                        # Stribeck hump (v_s +5 %, F_c -2 % on the plant's own recordings)
+MIN_SAMPLES = 500       # fewer usable samples: nothing is fitted
+RINGING = 3.0           # samples whose pressure-force ringing exceeds this x its median: out
+
+
+@njit(cache=True)
+def curve(v, F_c, F_s, v_s, mu):
+    """Eq. 3.33 at every velocity of v (core.plant.friction.friction)."""
+    out = np.empty(len(v))
+    for k in range(len(v)):
+        out[k] = friction(v[k], STRIBECK, F_c, F_s, v_s, mu)[0]
+    return out
+
+
+def force_velocity(rec, p) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Piston velocity [m/s], friction force from the pressures [N] and the samples used."""
+    from scipy.signal import savgol_filter
+    v = savgol_filter(rec.position, WINDOW, 3, deriv=1, delta=rec.Ts)
+    a = savgol_filter(rec.position, WINDOW, 3, deriv=2, delta=rec.Ts)
+    raw = p.A_p * rec.p_d - rec.load
+    smooth = savgol_filter(raw, WINDOW, 3)
+    force = smooth - p.m_p * a
+    ringing = np.sqrt(savgol_filter((raw - smooth) ** 2, WINDOW, 0))
+    edge = np.zeros(rec.n, bool)
+    edge[WINDOW:-WINDOW] = True
+    keep = rec.recorded & edge & (np.abs(v) >= V_MIN) & \
+        (ringing <= RINGING * np.median(ringing))
+    return v, force, keep
+
+
+def identify(rec, p, log=print) -> dict:
+    """Fit eq. 3.33 (multipliers of the nominal F_c, F_s, v_s, mu); estimates, fit and the
+    figure's data (samples, binned means)."""
+    v, force, keep = force_velocity(rec, p)
+    vk, fk = v[keep], force[keep]
+    if len(vk) < MIN_SAMPLES:
+        return _unidentified(p, f'{len(vk)} usable samples (moving faster than {V_MIN} m/s '
+                                f'without ringing): expected at least {MIN_SAMPLES}')
+    nominal = np.array([getattr(p, n) for n in FITTED])
+
+    def residual(x):
+        c = x * nominal
+        return curve(vk, c[0], c[1], c[2], c[3]) - fk
+
+    fit = least_squares_fit(residual, np.ones(4), FITTED, [1e-3] * 4, [50.0] * 4,
+                            np.nonzero(keep)[0] // 250)
+    est = {f'friction.{n}': fit.estimate(n, getattr(p, n), getattr(p, n), floor=MODEL_ERROR)
+           for n in FITTED}
+    c = fit.x * nominal
+    log(f'identify: friction: F_c {c[0]:.0f} N, F_s {c[1]:.0f} N, v_s {c[2] * 1e3:.1f} mm/s, '
+        f'mu {c[3]:.0f} N s/m ({len(vk)} samples up to {np.max(np.abs(vk)):.3f} m/s, force '
+        f'residual {fit.residual_rms:.0f} N)')
+    edges = np.linspace(-np.max(np.abs(vk)), np.max(np.abs(vk)), BINS + 1)
+    idx = np.digitize(vk, edges) - 1
+    full = [(idx == b).sum() for b in range(BINS)]
+    centres = [vk[idx == b].mean() for b in range(BINS) if full[b] >= 5]
+    means = [fk[idx == b].mean() for b in range(BINS) if full[b] >= 5]
+    return {'estimates': est, 'fit': fit, 'values': dict(zip(FITTED, c.tolist())),
+            'data': {'velocity': vk, 'force': fk, 'bin_velocity': np.array(centres),
+                     'bin_force': np.array(means)},
+            'force_rmse_n': {'identified': fit.residual_rms,
+                             'nominal': float(np.sqrt(np.mean(residual(np.ones(4)) ** 2)))}}
+
+
+def _unidentified(p, why: str) -> dict:
+    from .fit import Estimate
+    est = {f'friction.{n}': Estimate(getattr(p, n), None, None, getattr(p, n), False,
+                                     f'not determined by the data: {why}') for n in FITTED}
+    return {'estimates': est, 'fit': None, 'values': {n: getattr(p, n) for n in FITTED},
+            'data': None, 'force_rmse_n': None}
