@@ -4,9 +4,11 @@ running loop, around core.ident.run.ExperimentRun and the plans of core.ident.ex
 Closed-loop kinds (friction, leakage, validation): on each eha/state(k) it publishes the
 reference (and, where the plan has one, the load on eha/sim/load_force) of tick
 k + experiment.lead_ticks stamped with that seq, as the sweep node does; the controller runs.
-Kind drive: no controller runs (run_stack --no-controller); the node answers each
-eha/state(k) with eha/command(k), the plan's motor-speed sine plus a slow proportional loop on
-the measured position, so in lock-step the plant steps on its commands.
+Kind drive: no controller runs (run_stack --no-controller); the node takes its place and
+answers each eha/estimate(k) with eha/command(k), the plan's motor-speed sine plus a slow
+proportional loop on the measured position of state(k): the loop's order state(k) ->
+estimate(k) -> command(k) is kept, so in lock-step the plant steps on its commands and the
+estimator (the sensor-fault half of the safe state) stays in step with the plant.
 
 At the plan's start it publishes eha/experiment (std_msgs/String, latched): one JSON message
 {"experiment", "version", "plant_side", "params"} (core.ident.experiments.Plan.message), which
@@ -51,6 +53,7 @@ class Experiment:
         self.lead = p['experiment.lead_ticks']
         self.loop = LoopStats(plan.Ts)
         self.ready_since = None
+        self.measured = (-1, 0.0)          # (seq, position) of the last state
         self.commands_seen = 0
         self.plant_active = True           # eha/plant_state; not heard: taken as active
         self.done = False
@@ -87,7 +90,11 @@ class Experiment:
         self.stopped(self.run.on_manager(msg.state, msg.reason))
 
     def on_estimate(self, msg):
-        self.stopped(self.run.on_estimate(msg.seq, msg.position, msg.consistency))
+        r = self.run
+        if self.drive:                     # answer estimate(k) first: the plant waits for it
+            seq, x = self.measured
+            self.send_command(msg, r.command_for(msg.seq, x if seq == msg.seq else msg.position))
+        self.stopped(r.on_estimate(msg.seq, msg.position, msg.consistency))
 
     def on_command(self, msg):
         self.commands_seen += 1
@@ -97,8 +104,7 @@ class Experiment:
 
     def handle_state(self, msg):
         k, r = msg.seq, self.run
-        if self.drive:                     # answer state(k) first: the plant waits for it
-            self.send_command(msg, r.command_for(k, msg.position))
+        self.measured = (k, msg.position)
         self.stopped(r.on_state(k, msg.position))
         if r.seq0 is None and not r.stopped and self.ready(k):
             r.start(k + self.lead)
@@ -124,13 +130,13 @@ class Experiment:
         return now - self.ready_since >= self.p['experiment.start_delay']
 
     # ---- outputs
-    def send_command(self, state, speed: float):
+    def send_command(self, estimate, speed: float):
         m = self.cmd
-        m.header.stamp = state.header.stamp
-        m.seq = state.seq
+        m.header.stamp = estimate.header.stamp
+        m.seq = estimate.seq
         m.motor_speed_ref = float(speed)
         m.saturated = abs(speed) >= self.run.limits.omega_max
-        publish_counted(self, self.pub_cmd, m, f'command {state.seq}')
+        publish_counted(self, self.pub_cmd, m, f'command {estimate.seq}')
 
     def send(self, seq: int):
         """Reference (and load) of plant tick ``seq``, stamped with it; seq 0: untimed (the

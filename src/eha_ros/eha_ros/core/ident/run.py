@@ -58,7 +58,7 @@ class ExperimentRun:
         return 0.0 if i is None or self.plan.load is None else float(self.plan.load[i])
 
     def command_for(self, seq: int, position: float) -> float:
-        """Drive plan: the motor-speed command answering state(seq), the plan's speed sine
+        """Drive plan: the motor-speed command of tick ``seq``, the plan's speed sine
         minus the slow position loop's ``position_gain x`` (x measured, centre 0), at most
         omega_max; zero once stopped."""
         if self.stopped:
