@@ -2,7 +2,8 @@
 the estimator and the controller tick by tick (so every assertion is on seq): the drive
 experiment answers estimate(k) with command(k) = the plan's speed sine minus the slow position
 loop and stops on the switch manager's FAILED_SAFE; a closed-loop experiment sends the
-reference and load of tick k + lead_ticks stamped with that seq and stops at the stroke guard;
+reference and load of tick k + lead_ticks stamped with that seq (and that tick's time) and
+stops at the stroke guard;
 both publish /eha/experiment (latched) at the plan's start; bad parameters are one line."""
 import json
 import subprocess
@@ -25,8 +26,8 @@ LEAK = {'kind': 'leakage', 'leakage.loads': [3000.0, -6000.0], 'leakage.hold': 0
 
 
 def args_of(over: dict) -> list:
-    return [x for k, v in over.items()
-            for x in ('-p', f'experiment:experiment.{k}:={json.dumps(v) if isinstance(v, list) else v}')]
+    return [x for k, v in over.items() for x in (
+        '-p', f'experiment:experiment.{k}:={json.dumps(v) if isinstance(v, list) else v}')]
 
 
 def plan_of(over: dict):
@@ -71,8 +72,11 @@ class Loop:
     def tick(self, k: int, x: float, wait_for_seq=None, answer=False):
         """state(k) and estimate(k) at position x (and command(k) as a controller, when
         ``answer``); then wait until ``wait_for_seq`` has come in (commands or references)."""
+        from builtin_interfaces.msg import Time
         S, P, C, _ = self.M
-        self.pub_state.publish(S(seq=k, position=x, valid=True))
+        state = S(seq=k, position=x, valid=True)
+        state.header.stamp = Time(sec=k // 1000, nanosec=(k % 1000) * 1_000_000)   # k ms
+        self.pub_state.publish(state)
         self.pub_est.publish(P(seq=k, position=x))
         if answer:
             self.pub_cmd.publish(C(seq=k))
@@ -138,8 +142,12 @@ def test_closed_loop_sends_references_and_loads_by_seq_and_stops_at_the_stroke(r
         assert loop.info[0]['experiment'] == 'leakage'
         for seq in range(start, k + lead):
             i = seq - start
-            assert loop.references[seq].position == 0.0
-            assert loop.loads[seq].force == plan.load[i], seq
+            ref, load = loop.references[seq], loop.loads[seq]
+            assert ref.position == 0.0 and load.force == plan.load[i], seq
+            # stamped with the time of the tick they are for, as the state of that tick
+            assert (ref.header.stamp.sec, ref.header.stamp.nanosec) == \
+                (load.header.stamp.sec, load.header.stamp.nanosec) == \
+                (seq // 1000, (seq % 1000) * 1_000_000), seq
         assert {loop.loads[start + q['start']].force for q in plan.parts} == {3e3, -6e3}
         loop.tick(k, 0.0571)                    # beyond the stroke margin: it stops
         assert wait_for(lambda: proc.poll() is not None, 30)

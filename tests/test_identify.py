@@ -110,6 +110,23 @@ def test_no_fitting_in_the_tree_is_one_line(tmp_path, monkeypatch, capsys):
     assert os.listdir(out) == ['identify.log']
 
 
+def test_recordings_made_elsewhere_are_only_fitted(tmp_path, monkeypatch, capsys):
+    """--recordings runs nothing: the fitting gets the paths, DIR may hold the recordings of a
+    --no-fit run (not a fit's output)."""
+    out = tmp_path / 'bench'
+    (out / 'recordings').mkdir(parents=True)
+    paths = [str(out / 'recordings' / f'{k}.mcap') for k in KINDS]
+    for path in paths:
+        open(path, 'wb').close()
+    calls = []
+    monkeypatch.setattr(I, 'fit_function', lambda: lambda *a, **kw: calls.append((a, kw)))
+    monkeypatch.setattr(I, 'interrupt_on_signals', lambda: [])
+    assert I.main(['--recordings', *paths, '--out', str(out)]) == 0
+    assert calls and calls[0][0] == (paths, str(out)) and set(os.listdir(out)) == {
+        'recordings', 'identify.log'}
+    assert 'identify: fitting 4 recordings' in capsys.readouterr().out
+
+
 def _listening(port: int) -> bool:
     with socket.socket() as s:
         s.settimeout(0.2)

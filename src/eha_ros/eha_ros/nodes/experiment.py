@@ -25,6 +25,7 @@ import time
 
 from eha_msgs.msg import (ActuatorCommand, ActuatorState, ExternalLoad, PositionEstimate,
                           PositionReference, RedundancyStatus)
+from builtin_interfaces.msg import Time
 from lifecycle_msgs.msg import State
 from std_msgs.msg import String
 
@@ -54,6 +55,7 @@ class Experiment:
         self.loop = LoopStats(plan.Ts)
         self.ready_since = None
         self.measured = (-1, 0.0)          # (seq, position) of the last state
+        self.stamped = (0, 0)              # (seq, header stamp in ns) of the last state
         self.commands_seen = 0
         self.plant_active = True           # eha/plant_state; not heard: taken as active
         self.done = False
@@ -105,6 +107,7 @@ class Experiment:
     def handle_state(self, msg):
         k, r = msg.seq, self.run
         self.measured = (k, msg.position)
+        self.stamped = (k, msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
         self.stopped(r.on_state(k, msg.position))
         if r.seq0 is None and not r.stopped and self.ready(k):
             r.start(k + self.lead)
@@ -139,14 +142,18 @@ class Experiment:
         publish_counted(self, self.pub_cmd, m, f'command {estimate.seq}')
 
     def send(self, seq: int):
-        """Reference (and load) of plant tick ``seq``, stamped with it; seq 0: untimed (the
+        """Reference (and load) of plant tick ``seq``: its seq, and the time it is meant for in
+        the header (the last state's stamp + the ticks between, Ts each); seq 0: untimed (the
         controller applies it at once and stops waiting for tick-locked references)."""
         r = self.run
-        self.ref.seq = int(seq)
+        k, ns = self.stamped
+        ns += int(round(max(0, seq - k) * self.plan.Ts * 1e9))
+        stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+        self.ref.header.stamp, self.ref.seq = stamp, int(seq)
         self.ref.position = r.reference_for(seq)
         publish_counted(self, self.pub_ref, self.ref, f'reference {seq}')
         if self.pub_load is not None:
-            self.load.seq = int(seq)
+            self.load.header.stamp, self.load.seq = stamp, int(seq)
             self.load.force = r.load_for(seq)
             publish_counted(self, self.pub_load, self.load, f'load {seq}')
 
@@ -165,9 +172,6 @@ class Experiment:
     def end(self):
         if self.pub_ref is not None:
             self.send(0)                      # untimed: the reference 0 (and no load) at once
-        elif self.pub_load is not None:
-            self.load.force = 0.0
-            publish_counted(self, self.pub_load, self.load, 'load 0')
         if self.p['experiment.exit_when_done']:
             self.done = True
 

@@ -33,8 +33,8 @@ def parse(argv):
     ap.add_argument('--spec', default='config/qft_spec.yaml', help='QFT specification (ROS params file, node design_qft)')
     ap.add_argument('--plant', default='config/plant.yaml', help='nominal plant parameters')
     ap.add_argument('--plant-params', default=None, metavar='FILE',
-                    help='plant.* keys of FILE over --plant: an identified plant (scripts/identify\'s '
-                         'identified.yaml) as the family\'s nominal plant')
+                    help='plant.* keys of FILE over --plant: an identified plant '
+                         '(scripts/identify\'s identified.yaml) as the family\'s nominal plant')
     ap.add_argument('--out', default='config/controller.yaml',
                     help='designed controller YAML (default: the one the stack runs)')
     ap.add_argument('--antiwindup', metavar='FILE', default=None,

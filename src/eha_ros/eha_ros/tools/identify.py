@@ -17,7 +17,8 @@ sim: plant_sim with the -p plant_sim:plant.* overrides (the plant under test); t
 and controller keep config/'s nominal values, as on a bench, so -p for any other node is
 refused. Lock-step by default (deterministic), --mode realtime on the wall clock.
 bridge: hardware_bridge to the PLC at ads.host:ads.tcp_port of config/hardware_bridge.yaml
-(a bench, or scripts/ads_peer started beside it), in real time. The PLC must answer and the
+(a bench, or scripts/ads_peer started beside it), in real time (lock-step with the test peer
+run as scripts/ads_peer --lockstep: a PLC keeps its own clock). The PLC must answer and the
 drive must be armed: identify arms it (activates hardware_bridge once the arming conditions
 hold) only with --activate, the operator's explicit choice; without it, it refuses.
 
@@ -46,7 +47,7 @@ from ..core.config.params import ParamError, default_config_dir
 from ..core.ident.experiments import KINDS
 
 PROG = 'identify'
-HELD = ('identification.json', 'identified.yaml', 'report.md', 'recordings')  # a DIR in use
+FITTED = ('identification.json', 'identified.yaml', 'report.md')   # a DIR holding a fit
 PLANT_KEYS = ('plant.', 'sim_node.seed')   # what -p may set on plant_sim
 FIT = 'eha_ros.core.ident.pipeline'
 PROGRESS_S = 5.0                           # s between progress lines
@@ -89,7 +90,8 @@ def parse(argv):
                     help='output folder (default out/identify/<time>); must not hold an '
                          'identification')
     ap.add_argument('--mode', choices=('lockstep', 'realtime'), default=None,
-                    help='--plant sim: lockstep (default) or realtime; --plant bridge: realtime')
+                    help='--plant sim: lockstep (default) or realtime; --plant bridge: realtime '
+                         '(default), lockstep only with the ADS test peer run with --lockstep')
     ap.add_argument('-p', dest='params', action='append', default=[],
                     metavar='plant_sim:KEY:=VALUE',
                     help='--plant sim: a parameter of the simulated plant (plant.*, or '
@@ -144,8 +146,11 @@ def plant_overrides(items, config_dir: str) -> list[str]:
     return [x for item in items for x in ('-p', item)]
 
 
-def check_out(out: str) -> None:
-    held = [f for f in HELD if os.path.exists(os.path.join(out, f))]
+def check_out(out: str, runs: bool) -> None:
+    """DIR holds no identification: no fit's output, and when experiments are to run, no
+    recordings (--recordings may fit DIR/recordings/ of a --no-fit run into DIR)."""
+    held = [f for f in FITTED + (('recordings',) if runs else ())
+            if os.path.exists(os.path.join(out, f))]
     if held:
         raise UsageError(f'--out {out} already holds an identification ({held[0]}): give '
                          f'another folder')
@@ -201,7 +206,7 @@ class Job:
         self.args = args
         self.out = args.out
         self.config = os.path.abspath(args.config)
-        check_out(self.out)
+        check_out(self.out, runs=not args.recordings)
         self.fit = None
         self.recordings = []
         self.plans, self.params, self.drive = {}, [], ''
@@ -238,8 +243,6 @@ class Job:
         if args.params:
             raise UsageError('-p changes the simulated plant: --plant bridge runs the drive as '
                              'it is')
-        if self.mode != 'realtime':
-            raise UsageError('--plant bridge runs in real time: the PLC keeps its own clock')
         self.drive = probe_drive(self.config)
         if not args.activate:
             raise UsageError('--plant bridge: the drive is not armed, and identify arms it only '
@@ -278,9 +281,10 @@ class Log:
 
 
 def run_experiment(job: Job, kind: str, log: Log) -> str:
-    """One experiment through run_stack; the path of its recording under DIR/recordings/. On
-    plant_sim, a run stopped because a node fell silent (a hung process, not the actuator: see
-    docs/identification.md) is run again, at most HUNG_RETRIES times; nothing else is."""
+    """One experiment through run_stack; the path of its recording under DIR/recordings/.
+    Without a real drive (plant_sim, or the ADS test peer in lock-step), a run stopped because a
+    node fell silent (a hung process, not the actuator: see docs/identification.md) is run
+    again, at most HUNG_RETRIES times; nothing else is."""
     plan = job.plans[kind]
     log(f'{PROG}: {kind}: {plan.summary}; {plan.duration_s:.1f} s of plant time')
     for attempt in range(HUNG_RETRIES + 1):
@@ -288,7 +292,8 @@ def run_experiment(job: Job, kind: str, log: Log) -> str:
         folder, reason, t0 = run_stack(job, kind, name, log)
         if not reason:
             break
-        if job.args.plant != 'sim' or HUNG not in reason or attempt == HUNG_RETRIES:
+        simulated = job.args.plant == 'sim' or job.mode == 'lockstep'
+        if not simulated or HUNG not in reason or attempt == HUNG_RETRIES:
             raise ExperimentFailed(f'experiment {kind} failed: {reason} (logs: {folder}/logs/)')
         log(f'{PROG}: {kind}: run_stack stopped ({reason}): a hung node, not the actuator; '
             f'running it again ({attempt + 2} of {HUNG_RETRIES + 1})')
