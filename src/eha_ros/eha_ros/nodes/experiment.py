@@ -163,6 +163,7 @@ class Experiment:
             return
         self.get_logger().error(f'experiment {self.plan.kind} stopped: {why}')
         self.exit_code = 1
+        self.publish_diagnostics()             # ERROR with the reason, before the node ends
         self.end()
 
     def finish(self):
