@@ -128,9 +128,11 @@ def test_every_registered_node_has_its_executable_module_and_files():
             assert os.path.isfile(os.path.join(cfg, f)), (info.name, f)
         if info.schema:
             assert registry.schema_for(info.name).node == info.name
-    # the loop that eha_loop composes and the stack starts: plant sides first, then loop nodes
+    # the loop that eha_loop composes and the stack starts: plant sides first, then loop nodes,
+    # then the tools that answer its ticks (the experiment node)
     from eha_ros import stack
-    assert stack.LOOP_NODES == registry.PLANT_NODES + registry.LOOP_NODES
+    assert stack.LOOP_NODES == registry.PLANT_NODES + registry.LOOP_NODES + registry.LOOP_TOOLS
+    assert registry.LOOP_TOOLS == ('experiment',)
     assert set(registry.LOOP_PREFIX) == set(registry.PLANT_NODES)
 
 

@@ -101,6 +101,12 @@ def test_a_node_that_dies_is_reported(tmp_path):
     (['--out', '/proc/eha'], 'cannot write the run folder'),
     (['--no-peer'], 'only applies to --plant bridge'),
     (['--plant', 'mock', '--activate'], '--activate only applies to --plant bridge'),
+    (['--experiment', 'drive'], 'add --no-controller'),
+    (['--experiment', 'friction', '--no-controller'], '--experiment friction needs the controller'),
+    (['--sweep', '--no-controller'], '--sweep needs the controller'),
+    (['--sweep', '--experiment', 'leakage'], 'give one'),
+    (['--plant', 'mock', '--plant-params', 'config/plant.yaml'], 'expected --plant sim'),
+    (['--plant-params', 'config/plant_sim.yaml'], 'sim_node.'),
 ])
 def test_bad_options_are_one_line(tmp_path, args, expect):
     r, folder, summary = run_stack(tmp_path, *args, timeout=60)

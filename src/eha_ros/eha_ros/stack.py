@@ -16,7 +16,8 @@ import time
 from .core.config.params import default_config_dir
 # plant-side nodes and the prefix of their loop parameters (core.hardware.params.loop_params):
 # their own lock-step switch (they publish /clock; the others use sim time) and start gate
-from .core.config.registry import LOOP_NODES as _LOOP, LOOP_PREFIX, NODE_FILES, PLANT_NODES
+from .core.config.registry import (LOOP_NODES as _LOOP, LOOP_PREFIX, LOOP_TOOLS, NODE_FILES,
+                                   PLANT_NODES)
 
 
 def proc_stat(pid: int) -> list[str]:
@@ -70,8 +71,9 @@ def node_command(name: str, config_dir: str | None = None, extra=(), files=None)
     return args + list(extra)
 
 
-# the 1 kHz loop: what eha_loop can host in one process (plant side first)
-LOOP_NODES = PLANT_NODES + _LOOP
+# the 1 kHz loop: what eha_loop can host in one process (plant side first), and the tools that
+# answer its ticks (the experiment node)
+LOOP_NODES = PLANT_NODES + _LOOP + LOOP_TOOLS
 
 
 def composed_command(nodes, config_dir: str | None = None, extra=None) -> list[str]:
@@ -169,6 +171,10 @@ class Stack:
                 out, err = subprocess.DEVNULL, subprocess.PIPE
             self.procs[name] = spawn(cmd, env=self.env, stdout=out, stderr=err, text=True)
         return self
+
+    def process_of(self, node: str) -> str:
+        """The process that runs ``node`` (eha_loop for a composed one)."""
+        return 'eha_loop' if node in self.composed else node
 
     def dead(self) -> dict:
         """Nodes that exited, with their exit codes."""

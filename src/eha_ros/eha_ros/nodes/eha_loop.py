@@ -8,6 +8,9 @@ delivered in-process, in the plant's (or bridge's) loop thread, so state(k) -> e
 -> command(k) completes within the tick. Everything else on the graph (sweep, recorder,
 monitors, tests) sees the usual topics over DDS. ``--nodes ...,live`` adds the live view as a
 guest: it takes the loop topics in-process and only its own params sections (no /**).
+``--nodes ...,experiment`` hosts the experiment node (core.config.registry LOOP_TOOLS: it
+answers the loop's ticks) with the loop nodes' parameters; when it ends itself, the process
+ends (the plant side writes zero speed as it stops).
 """
 from __future__ import annotations
 
@@ -17,7 +20,7 @@ import sys
 
 from ..core.config.cli import UsageError, guarded
 from ..core.config.params import load, parse_ros_args
-from ..core.config.registry import GUESTS, LOOP_NODES
+from ..core.config.registry import GUESTS, LOOP_NODES, LOOP_TOOLS
 from . import common
 
 COMPOSED_STALE_CHECK = 0.005   # s: estimator.node.timer_period in eha_loop unless given
@@ -39,14 +42,14 @@ def parse(argv):
                     help='plant side: the simulator (plant_sim) or the drive (hardware_bridge)')
     ap.add_argument('--nodes', default=','.join(LOOP_NODES),
                     help='co-located nodes besides the plant side (default: %(default)s; '
-                         f'may add {", ".join(GUESTS)})')
+                         f'may add {", ".join(GUESTS + LOOP_TOOLS)})')
     args = ap.parse_args(ours)
     names = [PLANTS[args.plant]] + [n for n in args.nodes.split(',') if n]
-    known = set(PLANTS.values()) | set(LOOP_NODES) | set(GUESTS)
+    known = set(PLANTS.values()) | set(LOOP_NODES) | set(GUESTS) | set(LOOP_TOOLS)
     for n in names:
         if n not in known:
             raise UsageError(f'--nodes: unknown node {n!r}: expected some of '
-                             f'{", ".join(LOOP_NODES + GUESTS)}')
+                             f'{", ".join(LOOP_NODES + GUESTS + LOOP_TOOLS)}')
     return names, ros
 
 

@@ -14,6 +14,9 @@ families:  thesis    the 270 plants of Table 4.5 (the QFT design grid)
            FILE      CSV or Parquet with columns C_eq, D_p, beta, k_T, k_E
                      [, friction, noise, leak_split] (multipliers of config/plant.yaml)
 Only the plant varies; estimator, controller and switch manager keep config/'s nominal values.
+--plant-params FILE centres the family on another plant: the plant.* keys of FILE (an
+identified plant, scripts/identify's identified.yaml) replace config/'s before the multipliers
+apply; the estimator and controller still keep config/'s values.
 Output (--out, default out/campaign/<scenario>-<family>-<time>/): results.parquet (one row per
 plant), campaign.json, report.md with plots, traces.npz, parts/ (rows as they finish).
 Ctrl-C keeps the finished rows; --resume DIR runs the rest.
@@ -55,6 +58,9 @@ def main(argv=None) -> int:
                     help='address of a running Dask scheduler, e.g. tcp://host:8786 '
                          '(default: start a LocalCluster)')
     ap.add_argument('--out', default=None, help='output folder (must not hold a campaign)')
+    ap.add_argument('--plant-params', default=None, metavar='FILE',
+                    help='the family\'s centre: plant.* keys of FILE over config/plant.yaml '
+                         '(an identified plant); kept by --resume')
     ap.add_argument('--resume', default=None, metavar='DIR',
                     help='finish the interrupted campaign in DIR')
     ap.add_argument('--no-report', action='store_true', help='skip report.md and its plots')
@@ -93,7 +99,8 @@ def main(argv=None) -> int:
                            1 if args.seed is None else args.seed, args.workers, args.scheduler,
                            args.out, args.resume, progress=not args.quiet,
                            report=not args.no_report,
-                           log=lambda s: print(s, file=sys.stderr, flush=True))
+                           log=lambda s: print(s, file=sys.stderr, flush=True),
+                           plant_params=args.plant_params)
         i = res.info
         print(f'campaign {i["scenario"]["name"]}: {i["rows"]} runs, {i["passed"]} passed, '
               f'{i["failed"]} failed ({i["errors"]} errors); wall {i["wall_s"]:.1f} s, first '
@@ -123,12 +130,15 @@ def run_set(args) -> int:
     out = args.out or C.default_out('set', args.family)
     for s in args.scenario:                           # bad names fail before the cluster
         C.SC.load(s)
+    if args.plant_params:
+        C.centre(args.plant_params)                   # a bad file, too
     C.FAM.resolve(args.family, seeds[0])
     client, cluster = C.connect(args.workers, args.scheduler)
     log = (lambda s: print(s, file=sys.stderr, flush=True))
     try:
         summary = CS.run_set(args.scenario, args.family, seeds, out, client, log=log,
-                             progress=not args.quiet, report=not args.no_report)
+                             progress=not args.quiet, report=not args.no_report,
+                             plant_params=args.plant_params)
     finally:
         if cluster is not None:
             C.quiet_shutdown(client)

@@ -32,6 +32,9 @@ def parse(argv):
                                  'the controller YAML loaded by the controller node.')
     ap.add_argument('--spec', default='config/qft_spec.yaml', help='QFT specification (ROS params file, node design_qft)')
     ap.add_argument('--plant', default='config/plant.yaml', help='nominal plant parameters')
+    ap.add_argument('--plant-params', default=None, metavar='FILE',
+                    help='plant.* keys of FILE over --plant: an identified plant '
+                         '(scripts/identify\'s identified.yaml) as the family\'s nominal plant')
     ap.add_argument('--out', default='config/controller.yaml',
                     help='designed controller YAML (default: the one the stack runs)')
     ap.add_argument('--antiwindup', metavar='FILE', default=None,
@@ -156,10 +159,22 @@ def antiwindup_only(a, spec, plant):
     return 0
 
 
+def load_plant(a) -> dict:
+    """The design's nominal plant: --plant, with the plant.* keys of --plant-params over it
+    (core.plant.node_params.plant_file: one line for a bad file)."""
+    if not a.plant_params:
+        return load(PLANT_SCHEMA, [a.plant])
+    if a.update_plant_yaml:
+        raise UsageError('--update-plant-yaml writes the designed drive into --plant; with '
+                         '--plant-params the drive is the identified one: give one of them')
+    from ..core.plant.node_params import plant_file
+    return load(PLANT_SCHEMA, [a.plant], plant_file(a.plant_params))
+
+
 def main(argv=None):
     a = parse(sys.argv[1:] if argv is None else argv)
     spec = load_spec(a.spec)
-    plant = load(PLANT_SCHEMA, [a.plant])
+    plant = load_plant(a)
     if a.antiwindup:
         return antiwindup_only(a, spec, plant)
     stamp = dt.datetime.now().strftime('%Y%m%d-%H%M%S')
@@ -178,7 +193,8 @@ def main(argv=None):
     it_p = 4 if a.quick else spec['position.iterations']
     if a.quick:
         pp['particles'] = min(pp['particles'], 12)
-    summary = {'spec': a.spec, 'plant': a.plant, 'seed': a.seed, 'quick': a.quick}
+    summary = {'spec': a.spec, 'plant': a.plant, 'plant_params': a.plant_params, 'seed': a.seed,
+               'quick': a.quick}
 
     # velocity loop
     bv = qb.velocity_bounds(spec, lambda w: family.torque_responses(fam, w)[0])
@@ -297,7 +313,8 @@ def main(argv=None):
     summary['elapsed_s'] = time.time() - t_start
 
     # files
-    header = (f'QFT design by scripts/design_qft: spec {a.spec}, plant {a.plant}, seed {a.seed}'
+    header = (f'QFT design by scripts/design_qft: spec {a.spec}, plant {a.plant}'
+              f'{" + " + a.plant_params if a.plant_params else ""}, seed {a.seed}'
               f'{", QUICK (not a full design)" if a.quick else ""}, {dt.datetime.now().isoformat(timespec="seconds")}\n'
               f'G_v = (1/k_T)({K1:.6g} + {K2:.6g}/s)/(s/{K3:.6g} + 1), k_T = {fam.k_T_nominal}\n'
               f'G = {g_txt}\n'

@@ -15,6 +15,11 @@ disarmed, until the operator activates it (/hardware_bridge/change_state activat
 /eha/bridge/arm) or --activate says so. Every state change is printed and on /diagnostics
 ('run_stack: lifecycle'); a transition that cannot be carried out fails the run with its
 reason.
+Identification (docs/identification.md): --experiment KIND adds the experiment node, which
+runs one experiment of thesis section 3.6 and ends the run; KIND drive sends the motor-speed
+command itself, so it runs with --no-controller (the estimator and switch manager stay: the
+safe state needs them). --plant-params FILE gives plant_sim an identified plant (the plant.*
+keys of FILE; estimator and controller keep config/'s nominal values).
 One stack per ROS domain: run_stack refuses to start (exit 2) while another plant publishes
 /eha/state on its domain; --domain-id N runs a second stack beside it. Ctrl-C, SIGTERM and
 SIGHUP stop the run cleanly (stack.json and recording written); the nodes die with run_stack
@@ -30,7 +35,8 @@ import time
 
 from ..core.config.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
 from ..core.config.registry import LOOP_NODES as LOOP, LOOP_PREFIX
-from ..core.config.params import default_config_dir
+from ..core.config.params import default_config_dir, override_arg
+from ..core.ident.experiments import KINDS
 from ..core.io.report import reserve_json, run_dir, write_json
 
 # an ERROR from these ends the run: the loop supervisor has put the actuator in its safe state
@@ -41,6 +47,7 @@ STOP_ON_ERROR = {'switch_manager: supervisor': 'loop supervisor', 'recorder: mca
 # which may run slower than the wall clock on a loaded machine)
 SILENT_AFTER = {'realtime': 5.0, 'lockstep': 20.0}
 PLANT_NODE = {'sim': 'plant_sim', 'bridge': 'hardware_bridge', 'mock': 'hardware_bridge'}
+FINISHING = ('sweep', 'experiment')        # tool nodes whose clean exit ends the run
 AUTOSTART_KEY = dict({node: f'{pre}.autostart' for node, pre in LOOP_PREFIX.items()},
                      controller='control.autostart')
 
@@ -68,6 +75,17 @@ def parse(argv):
                          'retried every second until then)')
     ap.add_argument('--sweep', action='store_true',
                     help='also run the sweep node (config/sweep.yaml); stop when it finishes')
+    ap.add_argument('--experiment', choices=KINDS, default=None, metavar='KIND',
+                    help='also run the experiment node (config/experiment.yaml) with this '
+                         'identification experiment, one of ' + ', '.join(KINDS) + '; stop when '
+                         'it finishes (drive: with --no-controller, it commands the drive itself)')
+    ap.add_argument('--no-controller', action='store_true',
+                    help='leave the controller out: another node answers /eha/state with '
+                         '/eha/command (--experiment drive); the plant side alone is managed')
+    ap.add_argument('--plant-params', default=None, metavar='FILE',
+                    help='--plant sim: plant_sim\'s plant.* parameters from FILE too (an '
+                         'identified plant, scripts/identify\'s identified.yaml), as -p '
+                         'plant_sim:... overrides; the other nodes keep config/\'s values'),
     ap.add_argument('--record', action='store_true',
                     help='record every /eha topic to out/stack/<run>/recording.mcap')
     ap.add_argument('--live', action='store_true',
@@ -118,8 +136,20 @@ def plan(args) -> dict:
     plant = PLANT_NODE[args.plant]
     nodes = [plant] + [n for n in LOOP
                        if not (n == 'switch_manager' and args.no_switch_manager)]
+    if args.no_controller:
+        nodes.remove('controller')
+    if args.sweep and args.experiment:
+        raise UsageError('--sweep and --experiment both drive the reference: give one')
+    if args.experiment == 'drive' and not args.no_controller:
+        raise UsageError('--experiment drive answers /eha/state with /eha/command itself: add '
+                         '--no-controller (the controller would answer too)')
+    if args.no_controller and (args.sweep or args.experiment not in (None, 'drive')):
+        tool = '--sweep' if args.sweep else f'--experiment {args.experiment}'
+        raise UsageError(f'--no-controller: {tool} needs the controller (it sends positions)')
     if args.sweep:
         nodes.append('sweep')
+    if args.experiment:
+        nodes.append('experiment')
     extra: dict = {}
     for item in args.params:
         node, sep, rest = item.partition(':')
@@ -129,6 +159,15 @@ def plan(args) -> dict:
             raise UsageError(f'-p {item!r}: node {node!r} is not in this stack '
                              f'({", ".join(nodes)})')
         extra.setdefault(node, []).extend(['-p', item])
+    if args.experiment:
+        extra.setdefault('experiment', [])[:0] = [
+            '-p', f'experiment:experiment.kind:={args.experiment}', '-p',
+            f'experiment:experiment.plant_side:={"sim" if args.plant == "sim" else "bridge"}']
+    if args.plant_params is not None:
+        if args.plant != 'sim':
+            raise UsageError('--plant-params sets the simulated plant (plant_sim): expected '
+                             '--plant sim')
+        extra.setdefault(plant, [])[:0] = plant_overrides(args.plant_params, args.config)
     if args.live_port is not None and not 0 <= args.live_port <= 65535:
         raise UsageError(f'--live-port {args.live_port}: expected 0..65535')
     if args.no_peer and args.plant != 'bridge':
@@ -144,7 +183,18 @@ def plan(args) -> dict:
         extra.setdefault(plant, []).extend(
             ['-p', f'{plant}:{LOOP_PREFIX[plant]}.lockstep_from_activation:=false'])
     return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant,
-            'managed': [plant, 'controller'], 'activate': activate}
+            'managed': [n for n in (plant, 'controller') if n in nodes], 'activate': activate}
+
+
+def plant_overrides(path: str, config_dir: str) -> list[str]:
+    """-p plant_sim:KEY:=VALUE of every plant.* key the params file ``path`` sets for plant_sim
+    (core.plant.node_params.plant_file): node-targeted, so they reach plant_sim alone, also
+    composed in eha_loop with the estimator and controller."""
+    from ..core.plant.node_params import plant_file
+    out = []
+    for key, value in plant_file(path, config_dir).items():
+        out += ['-p', f'plant_sim:{key}:={override_arg(value)}']
+    return out
 
 
 def build_stack(args, p: dict, out: str | None = None, managed: bool = False):
@@ -210,15 +260,16 @@ def bring_up(manager, stack, p: dict, deadline: float, monitor=None, out: str = 
     retried, another stack's node of the same name (discovery had not shown its plant before
     the start) is refused as before the start (its node may be the one answering)."""
     plant = p['plant']
-    steps = [(plant, 'configure', True), ('controller', 'configure', False),
-             ('controller', 'activate', False)]
+    steps = [(plant, 'configure', True)]
+    if 'controller' in p['managed']:
+        steps += [('controller', 'configure', False), ('controller', 'activate', False)]
     if p['activate']:
         steps.append((plant, 'activate', True))
 
     def dead():
         gone = stack.dead()
         if not gone and monitor is not None:
-            _refuse_late(stack, monitor, out, nodes=(plant, 'controller'))
+            _refuse_late(stack, monitor, out, nodes=tuple(p['managed']))
         return gone
     why = manager.bring_up(steps, deadline, dead)
     if why:
@@ -325,8 +376,9 @@ def run(args, signals=()) -> int:
             if reason != 'duration':
                 break
             dead = stack.dead()
-            if 'sweep' in dead and dead['sweep'] == 0 and len(dead) == 1:
-                reason = 'sweep finished'
+            done = [n for n in FINISHING if dead.get(stack.process_of(n), 1) == 0]
+            if done and len(dead) == 1:
+                reason = f'{done[0]} finished'
                 break
             if dead:
                 reason = 'node exited: ' + ', '.join(f'{n} ({c})' for n, c in dead.items())
@@ -372,7 +424,7 @@ def run(args, signals=()) -> int:
     print(progress_line(elapsed, next((v for k, v in sorted(diagnostics.items())
                                        if k.startswith(f'{p["plant"]}: ')), {}), cpu_share))
     bad = {n: c for n, c in codes.items() if c not in (0, None)}
-    failed = reason != 'duration' and not reason.startswith(('sweep', 'interrupted')) or bad \
+    failed = reason != 'duration' and not reason.startswith(FINISHING + ('interrupted',)) or bad \
         or errors
     print(f'run_stack: {"FAILED: " if failed else ""}stopped ({reason}) after {elapsed:.1f} s; '
           f'{"exit codes " + str(bad) if bad else "every process exited with 0"}'

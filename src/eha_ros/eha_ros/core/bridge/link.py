@@ -57,6 +57,8 @@ def ads_error_text(code: int) -> str:
 class AdsLink:
     """One route to one PLC runtime (AMS net id + port) at ``host:tcp_port``."""
 
+    log_level = 2            # AdsLib's own stderr lines (quiet_adslib); 4: none
+
     def __init__(self, smap: SymbolMap, ams_net_id: str, ams_port: int, host: str,
                  tcp_port: int, timeout: float, sum_mode: str = 'readwrite'):
         self.smap = smap
@@ -77,7 +79,7 @@ class AdsLink:
         """Open the route, check every symbol, build the cyclic request; returns the PLC's
         current command block {role: SI value} (so the bridge starts from what is there)."""
         import pyads
-        quiet_adslib()
+        quiet_adslib(self.log_level)
         self.close()
         conn = pyads.Connection(self.ams_net_id, self.ams_port, f'{self.host}:{self.tcp_port}')
         try:

@@ -343,6 +343,21 @@ def load(schema: Schema, files: Sequence[str] = (), overrides: Mapping[str, Any]
     return schema.validate(values, where, context)
 
 
+def override_arg(value: Any) -> str:
+    """The text of ``-p key:=TEXT`` that rcl and :func:`parse_ros_args` read back as ``value``
+    (YAML 1.1: a float keeps a dot and a signed exponent, 1e-12 -> 1.0e-12)."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, float):
+        mantissa, e, exponent = repr(value).partition('e')
+        if '.' not in mantissa and mantissa.lstrip('-').isdigit():
+            mantissa += '.0'
+        return mantissa + (f'e{"" if exponent[0] in "+-" else "+"}{exponent}' if e else '')
+    if isinstance(value, (list, tuple)):
+        return '[' + ', '.join(override_arg(v) for v in value) + ']'
+    return str(value)
+
+
 def default_config_dir() -> str:
     """The repository's config/ folder (or $EHA_CONFIG_DIR)."""
     env = os.environ.get('EHA_CONFIG_DIR')

@@ -22,6 +22,9 @@ class NodeInfo:
     ``loop`` a loop node eha_loop composes with it, ``guest`` a node that may join the loop's
     process, ``tool`` a node of its own process, ``container`` eha_loop itself.
     ``loop_prefix``: the parameter group of a plant side's loop settings (lockstep, autostart).
+    ``joins_loop``: a tool that eha_loop hosts in real time with the loop nodes' parameters
+    (plant.yaml's /** included): it answers the loop's ticks, which from a process of its own
+    come too late for a 1 ms tick.
     """
 
     name: str
@@ -29,6 +32,7 @@ class NodeInfo:
     files: tuple = ()
     schema: tuple | None = None
     loop_prefix: str | None = None
+    joins_loop: bool = False
 
     @property
     def executable(self) -> str:
@@ -52,6 +56,8 @@ _NODES = (
              ('eha_ros.core.redundancy.params', 'SCHEMA')),
     NodeInfo('live', GUEST, ('live.yaml',), ('eha_ros.core.io.live_params', 'SCHEMA')),
     NodeInfo('sweep', TOOL, ('plant.yaml', 'sweep.yaml'), ('eha_ros.core.sweep.params', 'SCHEMA')),
+    NodeInfo('experiment', TOOL, ('plant.yaml', 'experiment.yaml'),
+             ('eha_ros.core.ident.params', 'SCHEMA'), joins_loop=True),
     NodeInfo('recorder', TOOL, ('recorder.yaml',), ('eha_ros.core.io.recorder_params', 'SCHEMA')),
     NodeInfo('eha_loop', CONTAINER),
 )
@@ -60,6 +66,7 @@ NODES = {n.name: n for n in _NODES}
 PLANT_NODES = tuple(n.name for n in _NODES if n.role == PLANT)
 LOOP_NODES = tuple(n.name for n in _NODES if n.role == LOOP)
 GUESTS = tuple(n.name for n in _NODES if n.role == GUEST)
+LOOP_TOOLS = tuple(n.name for n in _NODES if n.joins_loop)
 # a node name -> its files in config/
 NODE_FILES = {n.name: list(n.files) for n in _NODES if n.files}
 LOOP_PREFIX = {n.name: n.loop_prefix for n in _NODES if n.loop_prefix}

@@ -67,14 +67,19 @@ def circle_h(Ad, Bd, Cd, Dd, L, P, z) -> np.ndarray:
     return (1.0 + M)[None, :] / (1.0 + K[None, :] * P)
 
 
+def current_accel(k_T: float, I_max: float, J_eq: float) -> float:
+    """The motor's acceleration (rad/s^2) at the drive's current limit with no load torque:
+    k_T I_max / J_eq (eq. 3.13 with i = I_max)."""
+    return k_T * I_max / J_eq
+
+
 def drive_reach(k_T: float, I_max: float, J_eq: float, Kp_w: float, delay: float) -> float:
     """How far (rad/s) a speed reference can lead the measured motor speed and still be
     followed: the speed-loop error that puts the drive at its current limit,
     k_T I_max / Kp_w (the P part of eq. 4.71), plus what the motor gains at the current-limited
-    acceleration k_T I_max / J_eq over ``delay`` (measurement to application: Ts and the
+    acceleration (:func:`current_accel`) over ``delay`` (measurement to application: Ts and the
     drive's delay)."""
-    torque = k_T * I_max
-    return torque / Kp_w + torque / J_eq * delay
+    return k_T * I_max / Kp_w + current_accel(k_T, I_max, J_eq) * delay
 
 
 def poles_from_params(real, imag) -> np.ndarray:

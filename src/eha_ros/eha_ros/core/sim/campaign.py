@@ -71,6 +71,16 @@ def nominal_params(config_dir: str | None = None, overrides=None) -> dict:
     return {n: node_params(n, schema_for(n), config_dir, overrides) for n in NODES}
 
 
+def centre(path: str, config_dir: str | None = None) -> dict:
+    """{'plant_sim:key': value} of the plant.* keys a params file sets (an identified plant):
+    the scenario overrides that make it the family's centre; one-line UsageError."""
+    from ..plant.node_params import plant_file
+    try:
+        return {f'plant_sim:{k}': v for k, v in plant_file(path, config_dir).items()}
+    except ParamError as err:
+        raise UsageError(f'--plant-params: {err}') from None
+
+
 def run_chunk(scn_doc: dict, nominal: dict, rows: list, trace: bool = True):
     """Worker task: the runs of one chunk. rows: dicts with ID_COLUMNS and any extra per-plant
     columns (linear predictions). Returns (row dicts with figures, traces or None)."""
@@ -344,7 +354,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
                  out: str | None = None, resume: str | None = None, client=None,
                  config_dir: str | None = None, progress: bool = True, report: bool = True,
                  chunk_size: int | None = None, trace: bool = True,
-                 log=print) -> CampaignResult:
+                 log=print, plant_params: str | None = None) -> CampaignResult:
     """Run ``scenario`` (name in config/campaigns/ or a YAML path) on ``family`` ('thesis',
     'random:N' or a CSV/Parquet of multipliers) with campaign seed ``seed``: each run draws
     its own noise from (seed, run id) (:func:`noise_seed`); random:N is drawn with it.
@@ -352,12 +362,17 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
     workers/scheduler choose the engine (a LocalCluster of ``workers`` processes, default one
     per core; or the Dask scheduler at ``scheduler``); ``client`` reuses an existing
     distributed.Client. ``resume=DIR`` finishes an interrupted campaign in DIR (scenario,
-    family and seed are read from it). Every user mistake is a UsageError with one line, raised
-    before anything is written."""
+    family and seed are read from it). ``plant_params``: a params file whose plant.* keys (an
+    identified plant, core.plant.node_params.plant_file) are the family's centre, the plant the
+    multipliers scale; kept in the scenario's overrides, so a resume keeps it. Every user
+    mistake is a UsageError with one line, raised before anything is written."""
     import pandas as pd
     t_start = time.monotonic()
     if int(seed) < 0:
         raise UsageError(f'seed {seed}: expected a non-negative integer')
+    if resume and plant_params:
+        raise UsageError(f'--resume {resume}: the campaign keeps the plant it started with: '
+                         f'drop --plant-params')
     if resume:
         info0, fam, scn, seed = _resume_inputs(resume, scenario)
         out, family = resume, info0['family']
@@ -366,6 +381,8 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
             raise UsageError('no scenario given: expected one of '
                              f'{", ".join(SC.available())} or a YAML path')
         scn = SC.load(scenario)
+        if plant_params:
+            scn.overrides = {**centre(plant_params, config_dir), **scn.overrides}
         if isinstance(family, dict):           # API: {column: array} of multipliers
             fam = {c: np.asarray(family.get(c, np.ones(len(family['C_eq']))), float)
                    for c in MULT}

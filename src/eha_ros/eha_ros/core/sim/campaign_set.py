@@ -44,10 +44,13 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=print,
-            progress: bool = True, report: bool = True, config_dir: str | None = None) -> dict:
+            progress: bool = True, report: bool = True, config_dir: str | None = None,
+            plant_params: str | None = None) -> dict:
     """Each scenario on each seed into DIR/<scenario>-seed<S>/ with the given Dask client;
     a folder that already holds a finished campaign is kept (reruns finish an interrupted
-    set), an unfinished one is resumed. Returns the summary (also DIR/summary.json, .md)."""
+    set), an unfinished one is resumed (with the plant it started with; ``plant_params``: the
+    family's centre of the new ones, run_campaign). Returns the summary (also
+    DIR/summary.json, .md)."""
     from . import scenarios as SC
     names = [SC.load(s).name for s in scenarios]         # unknown scenarios fail first
     if len(set(names)) != len(names):
@@ -66,7 +69,8 @@ def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=pri
             resume = d if info is not None else None
             run_campaign(None if resume else scn, family, seed, out=None if resume else d,
                          resume=resume, client=client, progress=progress, report=report,
-                         config_dir=config_dir, log=log)
+                         config_dir=config_dir, log=log,
+                         plant_params=None if resume else plant_params)
     summary = summarize(folders, family)
     summary['wall_s'] = round(time.monotonic() - t0, 1)
     write_json(os.path.join(out, 'summary.json'), summary, True)

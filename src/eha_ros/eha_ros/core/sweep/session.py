@@ -43,6 +43,23 @@ def filled(y: np.ndarray, need: float = 0.95):
     return np.interp(idx, idx[ok], y[ok])
 
 
+class TrackingGuard:
+    """Abort on a lost track: |reference - position| above ``limit`` for ``ticks`` ticks in a
+    row (the sweep's abort, and the identification experiments')."""
+
+    def __init__(self, limit: float, ticks: int):
+        self.limit, self.ticks, self.count = limit, ticks, 0
+
+    def update(self, reference: float, position: float, tick: int) -> str | None:
+        """One tick; the reason (one line) once the error has persisted, else None."""
+        err = abs(reference - position)
+        self.count = self.count + 1 if err > self.limit else 0
+        if self.count >= self.ticks:
+            return (f'position error {err * 1e3:.2f} mm > {self.limit * 1e3:.2f} mm at tick '
+                    f'{tick}')
+        return None
+
+
 class Writer:
     """Runs file writes on a background thread so 1 kHz callbacks never wait for the disk."""
 
@@ -109,8 +126,7 @@ class SweepSession:
         os.makedirs(os.path.join(out_dir, 'data'), exist_ok=True)
         self.meta = dict(meta)
         self.output = output
-        self.abort_error = abort_error
-        self.abort_ticks = abort_ticks
+        self.guard = TrackingGuard(abort_error, abort_ticks)
         self.model = model                     # callable freqs_hz -> (gain_db, phase_deg)
         self.settle = settle_periods
         self.ref = plan.array()
@@ -118,7 +134,6 @@ class SweepSession:
         self.seq0 = None
         self.points = []
         self.next_segment = 0
-        self.error_count = 0
         self.aborted = None
         self.finished = False
         self.writer = Writer(background_writes)
@@ -165,13 +180,10 @@ class SweepSession:
         """Abort when |reference - position| exceeds the limit for abort_ticks ticks in a row."""
         if self.aborted or self.seq0 is None:
             return False
-        err = abs(self.reference_for(seq) - position)
-        self.error_count = self.error_count + 1 if err > self.abort_error else 0
-        if self.error_count >= self.abort_ticks:
-            self.aborted = (f'aborted: position error {err * 1e3:.2f} mm > '
-                            f'{self.abort_error * 1e3:.2f} mm at tick {seq - self.seq0}')
-            return True
-        return False
+        why = self.guard.update(self.reference_for(seq), position, seq - self.seq0)
+        if why:
+            self.aborted = f'aborted: {why}'
+        return why is not None
 
     def progress(self, done_seq: int) -> list:
         """Analyse every segment whose data is complete up to done_seq; returns new points."""

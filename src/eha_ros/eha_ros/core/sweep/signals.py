@@ -1,5 +1,5 @@
 """Test signals: stepped sine like the TwinCAT Fr_Test block (appendix B.1), chirp, step (of the
-reference, or of the load force for a load step).
+reference, or of the load force for a load step), staircase of held levels (a held load).
 
 Each signal is a plan that maps a tick index to a reference, so a node (one tick at a time)
 and batch code (whole arrays) produce the identical signal.
@@ -138,6 +138,42 @@ class Step:
 
     def array(self) -> np.ndarray:
         return np.array([self.value(k) for k in range(self.n_ticks)])
+
+
+@dataclass
+class Staircase:
+    """Levels held in turn, each reached by a linear ramp from the one before: ``rest_s`` at 0,
+    then for each level a ramp of ``ramp_s`` and a hold of ``hold_s``, then a ramp back to 0
+    and ``rest_s`` at 0 (a load held at several levels, thesis Fig. 3.44). ``segments``: one
+    Segment per hold (freq_hz 0, amplitude = the level)."""
+
+    levels: tuple
+    hold_s: float
+    ramp_s: float
+    rest_s: float
+    Ts: float = 1e-3
+    segments: list = field(init=False)
+
+    def __post_init__(self):
+        rest, ramp, hold = (int(round(t / self.Ts)) for t in (self.rest_s, self.ramp_s,
+                                                                self.hold_s))
+        points = [(0, 0.0), (rest, 0.0)]           # (tick, value) corners, linear between
+        self.segments = []
+        for level in self.levels:
+            k = points[-1][0] + ramp
+            points += [(k, float(level)), (k + hold, float(level))]
+            self.segments.append(Segment(0.0, k, k + hold, k - ramp, float(level)))
+        k = points[-1][0] + ramp
+        points += [(k, 0.0), (k + rest, 0.0)]
+        self.corners = points
+        self.n_ticks = k + rest
+
+    def array(self) -> np.ndarray:
+        ticks, values = zip(*self.corners)
+        return np.interp(np.arange(self.n_ticks), ticks, values)
+
+    def value(self, k: int) -> float:
+        return float(np.interp(k, *zip(*self.corners))) if 0 <= k < self.n_ticks else 0.0
 
 
 def check_sweep(start_hz, increment_hz, max_hz, periods, relax_s, amplitude, offset, stroke, Ts,
