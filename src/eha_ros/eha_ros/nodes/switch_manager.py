@@ -79,12 +79,15 @@ class SwitchManagerNode:
         self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
         self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
         self.create_service(SwitchChannel, 'eha/switch_channel', self.on_switch)
-        self.create_timer(p['switch.node.status_period'], self.on_status_timer)
-        self.create_timer(p['switch.node.diagnostics_period'], self.publish_diagnostics)
         from rclpy.clock import Clock, ClockType
-        # wall time, also in lock-step: a stalled loop stops the simulated clock
-        self.create_timer(SUPERVISOR_CHECK, self.on_supervisor_timer,
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # wall time, also in lock-step: a stalled loop stops the simulated clock, and on the
+        # simulated clock rclpy's EventsExecutor stopped firing these timers in most lock-step
+        # runs under load (docs/nodes/switch_manager.md)
+        wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(p['switch.node.status_period'], self.on_status_timer, clock=wall)
+        self.create_timer(p['switch.node.diagnostics_period'], self.publish_diagnostics,
+                          clock=wall)
+        self.create_timer(SUPERVISOR_CHECK, self.on_supervisor_timer, clock=wall)
         self.Select, self.Status = ChannelSelect, RedundancyStatus
         self.flush()
         self.get_logger().info(

@@ -81,8 +81,9 @@ NODE = Schema('switch_manager', [
           doc='speed, current, pressure and estimator monitors start judging once the '
               'position loop has been closed (fresh commands) this long (start-up transient)'),
     Param(S + 'node.status_period', 'float', 's', 0.2, 0.01, 10.0,
-          doc='/eha/redundancy is published on change and at this period'),
-    Param(S + 'node.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+          doc='/eha/redundancy is published on change and at this period (wall time)'),
+    Param(S + 'node.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0,
+          doc='/diagnostics period (wall time, also in lock-step)'),
     Param(S + 'node.state_timeout', 'float', 's', 0.05, 0.001, 10.0,
           doc='no /eha/state for this long is reported on /diagnostics'),
     Param(S + 'node.log_dir', 'str', '', 'out/redundancy',
