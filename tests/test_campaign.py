@@ -43,10 +43,11 @@ def write_family_csv(path, fam):
 
 
 def slow_scenario(tmp_path, seconds=20.0):
-    """A sine scenario of ``seconds`` per run: long enough to act mid-campaign."""
+    """A sine scenario of ``seconds`` per run: long enough to act mid-campaign (the window
+    from 6 s as config/campaigns/sine.yaml's: the adaptive states have settled)."""
     p = tmp_path / 'slow.yaml'
     p.write_text(yaml.safe_dump({'name': 'slow', 'kind': 'sine',
-                                 'params': {'duration': seconds, 'window': [2.0, seconds]},
+                                 'params': {'duration': seconds, 'window': [6.0, seconds]},
                                  'specs': {'rmse_ratio': {'max': 0.5}}}))
     return str(p)
 
@@ -327,8 +328,9 @@ def test_local_cluster_loses_a_worker_and_still_delivers_every_row(tmp_path):
     assert sorted(df['run_id']) == list(range(len(fam['C_eq'])))
     assert (df['error'] == '').all()
     assert res.info['complete'] and res.info['rows'] == len(fam['C_eq'])
-    # nominal plant first: the estimator's figure at nominal
-    assert df.loc[df['run_id'] == 0, 'rmse_ratio'].iloc[0] < 0.3
+    # nominal plant first: the family's limit on the estimator's figure (each run draws its own
+    # noise; at nominal the ratio over 6-20 s spans 0.20-0.39 across 16 noise seeds)
+    assert df.loc[df['run_id'] == 0, 'rmse_ratio'].iloc[0] < 0.5
 
 
 def test_cli_ctrl_c_keeps_rows_and_resume_finishes(tmp_path):

@@ -46,7 +46,7 @@ def test_load_step_over_dds_meets_the_decided_limits_and_agrees_with_batch(tmp_p
     scn = SC.load('load_step')
     nominal = nominal_params()
     limits, lin = plant_limits(scn, {}, nominal)
-    assert lin['loaded_in_table'] and limits['peak_deviation_m'] == (
+    assert not lin['loaded_beyond_table'] and limits['peak_deviation_m'] == (
         'max', pytest.approx(1.25 * lin['lin_loaded_peak_deviation_m'] + 50e-6))
     assert limits['steady_error_m'] == ('max', 20e-6)
 

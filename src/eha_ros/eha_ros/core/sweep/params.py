@@ -32,9 +32,9 @@ NODE = Schema('sweep', [
     Param('sweep.chirp_duration', 'float', 's', 30.0, 0.1, 3600.0),
     Param('sweep.chirp_fade', 'float', 's', 0.5, 0.0, 60.0),
     Param('sweep.step_duration', 'float', 's', 2.0, 0.05, 3600.0),
-    Param('sweep.load_step_duration', 'float', 's', 5.0, 0.05, 3600.0,
+    Param('sweep.load_step_duration', 'float', 's', 5.5, 0.05, 3600.0,
           doc='load_step: run length; at least the step (0.5 s) plus the end of the steady '
-              'window (4.5 s after it)'),
+              'window (4.5 s after it); 0.5 s more covers a load that reaches the plant late'),
     Param('sweep.lead_ticks', 'int', '', 2, 1, 100,
           doc='references are sent this many ticks ahead, stamped with their tick'),
     Param('sweep.start_delay', 'float', 's', 1.0, 0.0, 600.0,
