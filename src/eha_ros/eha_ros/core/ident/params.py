@@ -38,8 +38,9 @@ NODE = Schema('experiment', [
     Param(E + 'drive.position_bandwidth', 'float', 'Hz', 0.1, 0.001, 10.0,
           doc='the slow proportional loop on the measured position added to the speed '
               'reference (keeps the piston in its stroke); at most the lowest sine / 5'),
-    Param(E + 'friction.freqs', 'float[]', 'Hz', [0.25, 0.5, 1.0, 2.0, 3.0, 4.0], 0.01, 1000.0,
-          doc='position sines of rising frequency, so of rising piston speed (Fig. 3.40)'),
+    Param(E + 'friction.freqs', 'float[]', 'Hz', [0.25, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0], 0.01,
+          1000.0, doc='position sines of rising frequency, so of rising piston speed (Fig. '
+                      '3.40); the fit needs speeds past the ringing of the Stribeck fall'),
     Param(E + 'friction.amplitude', 'float', 'm', 0.005, 1e-5, 0.1),
     Param(E + 'friction.periods', 'int', '', 3, 1, 10000, doc='periods per frequency'),
     Param(E + 'friction.relax', 'float', 's', 0.5, 0.0, 60.0,
