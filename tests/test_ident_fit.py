@@ -172,3 +172,23 @@ def test_fit_reports_what_the_data_cannot_separate():
         assert k.identified
         covered += k.ci_low < 2.0 < k.ci_high
     assert covered >= 34, covered
+
+
+def test_identified_yaml_takes_the_friction_curve_whole_or_not_at_all():
+    """Eq. 3.33's four parameters trade off: identified.yaml gets all four fitted values or none
+    (a fitted F_s beside a nominal F_c is a curve no data showed), the others one by one."""
+    from eha_ros.core.ident.pipeline import changed_keys, nominal_plant as plant_values
+    _, values = plant_values(None)
+    est = {'C_eq': F.Estimate(2e-12, 1.9e-12, 2.1e-12, 3.8e-12, True, ''),
+           'drive.Kp_w': F.Estimate(0.7, 0.69, 0.71, 0.59, True, ''),
+           'drive.Ki_w': F.Estimate(40.0, 20.0, 60.0, 46.2, False, 'wide'),
+           'friction.F_s': F.Estimate(1200.0, 1150.0, 1250.0, 800.0, True, ''),
+           'friction.F_c': F.Estimate(700.0, 400.0, 1000.0, 450.0, False, 'wide')}
+    curve = {'F_c': 700.0, 'F_s': 1200.0, 'v_s': 0.02, 'mu': 1500.0}
+    out = changed_keys(est, values, curve)
+    assert {k: out[k] for k in out if 'friction' in k} == {
+        f'plant.friction.{n}': v for n, v in curve.items()}
+    assert out['plant.drive.Kp_w'] == 0.7 and 'plant.drive.Ki_w' not in out
+    assert not any('friction' in k for k in changed_keys(est, values, None))
+    bad = dict(curve, F_s=300.0)                       # F_s < F_c: eq. 3.33 refuses it
+    assert not any('friction' in k for k in changed_keys(est, values, bad))
