@@ -240,8 +240,8 @@ def test_load_step_session_reports_the_campaign_figures(tmp_path, capsys):
 
 @pytest.mark.parametrize('shift, words', [
     (-200, 'a load reached the plant at 0.300 s, before the step planned at 0.5 s'),
-    (20, 'the load step reached the plant at 0.520 s, 20 ms after the plan: the run of 5 s '
-         'ends before its steady window'),
+    (600, 'the load step reached the plant at 1.100 s, 600 ms after the plan: the run of 5.5 s '
+          'ends before its steady window'),
 ])
 def test_a_load_step_off_its_plan_is_incomplete(tmp_path, shift, words):
     """The step is where the truth reports it; one that reached the plant well before the plan
