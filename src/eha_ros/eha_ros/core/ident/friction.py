@@ -61,8 +61,9 @@ def force_velocity(rec, p) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     ringing = np.sqrt(savgol_filter((raw - smooth) ** 2, WINDOW, 0))
     edge = np.zeros(rec.n, bool)
     edge[WINDOW:-WINDOW] = True
-    keep = rec.recorded & edge & (np.abs(v) >= V_MIN) & \
-        (ringing <= RINGING * np.percentile(ringing[rec.recorded & edge], QUIET))
+    valid = rec.recorded & edge
+    keep = valid & (np.abs(v) >= V_MIN) & \
+        (ringing <= RINGING * np.percentile(ringing[valid], QUIET))
     return v, force, keep
 
 
