@@ -28,6 +28,14 @@ def sweep_cmd(out, name):
                                                 '-p', f'sweep:sweep.run_name:={name}'])
 
 
+def points_done(summary_path) -> int:
+    """Frequencies finished so far, from the summary the sweep rewrites as it goes."""
+    try:
+        return len(json.load(open(summary_path))['points'])
+    except (OSError, ValueError):
+        return 0
+
+
 def test_stepped_sweep_over_dds(stack, tmp_path):
     res = subprocess.run(sweep_cmd(tmp_path, 'full'), capture_output=True, text=True, timeout=240)
     summary = json.load(open(tmp_path / 'full' / 'summary.json'))
@@ -44,19 +52,40 @@ def test_stepped_sweep_over_dds(stack, tmp_path):
 def test_interrupt_mid_sweep_keeps_finished_points(stack, tmp_path):
     proc = start_process(sweep_cmd(tmp_path, 'cut'))
     summary_path = tmp_path / 'cut' / 'summary.json'
-
-    def points():
-        try:
-            return len(json.load(open(summary_path))['points'])
-        except (OSError, ValueError):
-            return 0
-    assert wait_for(lambda: points() >= 2, 120), 'no frequency finished'
+    assert wait_for(lambda: points_done(summary_path) >= 2, 120), 'no frequency finished'
     code, out, err = stop_process(proc)                 # SIGINT, like Ctrl-C
     summary = json.load(open(summary_path))
     assert summary['complete'] is False and summary['status'] == 'interrupted'
     assert [p['freq_hz'] for p in summary['points']][:2] == [1, 4]
     assert all(p['coherence'] > 0.9 for p in summary['points'])
     assert 'Traceback' not in err
+
+
+def test_the_loops_safe_state_aborts_the_sweep_over_dds(stack, ros_node, tmp_path):
+    # FAILED_SAFE on eha/redundancy (remapped here, so the module's controller never sees it)
+    # mid-sweep: the sweep stops with the reason, exit 1, summary incomplete, no traceback
+    from eha_msgs.msg import RedundancyStatus
+    from eha_ros.nodes.common import latched_qos
+    topic = '/test_sweep/redundancy'
+    proc = start_process(sweep_cmd(tmp_path, 'safe') + ['-r', f'eha/redundancy:={topic}'])
+    summary_path = tmp_path / 'safe' / 'summary.json'
+    pub = ros_node.create_publisher(RedundancyStatus, topic, latched_qos())
+    try:
+        assert wait_for(lambda: points_done(summary_path) >= 1, 120), 'no frequency finished'
+        msg = RedundancyStatus()
+        msg.state, msg.reason = 'FAILED_SAFE', 'test: loop supervisor'
+        pub.publish(msg)                    # latched: delivered once the sweep has matched
+        proc.wait(timeout=60)
+    finally:
+        code, out, err = stop_process(proc)
+        ros_node.destroy_publisher(pub)
+    summary = json.load(open(summary_path))
+    print(summary['status'], err[-600:])
+    assert code == 1 and 'Traceback' not in err
+    assert summary['complete'] is False
+    assert summary['status'] == 'aborted: safe state: switch manager FAILED_SAFE (test: loop ' \
+                                'supervisor)'
+    assert 'safe state: switch manager FAILED_SAFE' in err
 
 
 def test_stiffness_over_dds(stack, tmp_path):

@@ -283,3 +283,22 @@ def test_load_step_shorter_than_its_window_is_refused_in_one_line():
         node_params('sweep', SCHEMA, overrides={'sweep:sweep.mode': 'load_step',
                                                 'sweep:sweep.load_step_duration': 4.9})
     assert 'expected at least 5 s' in str(err.value) and '\n' not in str(err.value)
+
+
+def test_the_loops_safe_state_aborts_the_sweep(tmp_path):
+    # the switch manager in FAILED_SAFE holds the actuator: nothing after it is the loop's
+    # response, so the sweep is aborted and incomplete (a first run once reported a 1.00 Hz
+    # bandwidth, "complete", from a loop its supervisor had put in the safe state)
+    plan = SteppedSine(1, 2, 9, 6, 0.1, 1e-3)
+    s = SweepSession(plan, str(tmp_path), {'mode': 'stepped'}, background_writes=False)
+    assert not s.check_manager('ACTIVE_A', '')
+    s.start(100)
+    for i in range(500):
+        s.record('reference', 100 + i, plan.array()[i])
+        s.record('truth', 100 + i, plan.array()[i])
+    assert s.check_manager('FAILED_SAFE', 'loop supervisor: estimator: no answer')
+    assert not s.check_manager('FAILED_SAFE', 'again')          # reported once
+    summary = s.finish()
+    assert summary['complete'] is False
+    assert summary['status'] == ('aborted: safe state: switch manager FAILED_SAFE (loop '
+                                 'supervisor: estimator: no answer)')

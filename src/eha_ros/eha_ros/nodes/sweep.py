@@ -6,7 +6,8 @@ a stepped sine of the external load on eha/sim/load_force with the reference hel
 offset; |F_L|/|x| per frequency against the bound of eq. 4.60 (the applied force is taken from
 eha/sim/truth). Mode load_step: a step of the load force at 0.5 s with the reference held; the
 batch campaigns' load step figures from eha/sim/truth (position and the position sensor's
-Gauss-Markov offset) and eha/estimate.
+Gauss-Markov offset) and eha/estimate. The loop's safe state (switch manager FAILED_SAFE on
+eha/redundancy) aborts the sweep (before its start: it never starts): summary incomplete, exit 1.
 
 On each eha/state(k) it publishes the reference of tick k + lead_ticks stamped with that seq;
 the controller applies it when it handles tick k + lead_ticks, so the reference timing is exact
@@ -21,7 +22,7 @@ import sys
 import time
 
 from eha_msgs.msg import (ActuatorCommand, ActuatorState, ExternalLoad, PlantTruth,
-                          PositionEstimate, PositionReference)
+                          PositionEstimate, PositionReference, RedundancyStatus)
 from lifecycle_msgs.msg import State
 
 from ..core.config.params import default_config_dir, load
@@ -87,6 +88,8 @@ class Sweep:
         self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
         self.create_subscription(PlantTruth, 'eha/sim/truth', self.on_truth, qos)
         self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
+        self.create_subscription(RedundancyStatus, 'eha/redundancy', self.on_redundancy,
+                                 latched_qos())
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'sweep: {p["sweep.mode"]}, {plan.n_ticks * plan.Ts:.1f} s planned, writing '
@@ -94,6 +97,12 @@ class Sweep:
 
     def on_plant_state(self, msg):
         self.plant_active = msg.id == State.PRIMARY_STATE_ACTIVE
+
+    def on_redundancy(self, msg):
+        if self.session.check_manager(msg.state, msg.reason):
+            self.get_logger().error(f'sweep {self.session.aborted}; reference back to the '
+                                    f'offset')
+            self.end()
 
     def on_command(self, msg):
         self.commands_seen += 1
@@ -118,6 +127,8 @@ class Sweep:
         s = self.session
         k = msg.seq
         if s.seq0 is None:
+            if s.aborted:
+                return                         # the safe state came first: never started
             if self.commands_seen == 0 or not self.plant_active:
                 self.ready_since = None
                 return                         # wait for an active loop
@@ -153,7 +164,10 @@ class Sweep:
         if self.session.finished:
             return
         self.send(0, self.session.position)
-        summary = self.session.finish(reason=reason)
+        if self.session.seq0 is None:          # stopped before the start: nothing measured
+            summary = self.session.finish(complete=False, reason=reason or self.session.aborted)
+        else:
+            summary = self.session.finish(reason=reason)
         print_table(summary, lambda line: self.get_logger().info(line))
         self.get_logger().info(f'report: {self.out}/ ({", ".join(self.session.files)})')
         if not summary['complete']:

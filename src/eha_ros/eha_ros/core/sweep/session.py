@@ -21,6 +21,7 @@ import threading
 import numpy as np
 
 from ..io.report import bode_png, stiffness_png, write_csv, write_json
+from ..redundancy.state_machine import FAILED_SAFE
 from .analysis import (BANDWIDTH_DB, sine_point, stiffness_kn_per_mm, stiffness_summary,
                        summarize)
 
@@ -184,6 +185,14 @@ class SweepSession:
         if why:
             self.aborted = f'aborted: {why}'
         return why is not None
+
+    def check_manager(self, state: str, reason: str) -> bool:
+        """Abort on the loop's safe state (switch manager FAILED_SAFE): the actuator holds, so
+        what follows is no response of the loop (and before the start, the sweep never runs)."""
+        if self.aborted or state != FAILED_SAFE:
+            return False
+        self.aborted = f'aborted: safe state: switch manager {FAILED_SAFE} ({reason})'
+        return True
 
     def progress(self, done_seq: int) -> list:
         """Analyse every segment whose data is complete up to done_seq; returns new points."""
