@@ -20,7 +20,7 @@ def test_second_run_is_a_quick_no_op():
     assert first.returncode == 0, first.stderr
     second, wall = run_setup()
     assert second.returncode == 0, second.stderr
-    for step in ('deps', 'cmake-fix', 'eha_msgs', 'eha_ros'):
+    for step in ('deps', 'cmake-fix', 'eha_msgs', 'eha_ros', 'kernels'):
         assert f'{step}: up to date' in second.stdout, second.stdout
     assert 'installing' not in second.stdout and 'building' not in second.stdout
     reported = float(re.search(r'ready in ([0-9.]+) s', second.stdout).group(1))
