@@ -6,17 +6,36 @@ import sys
 from setuptools import find_packages, setup
 
 PACKAGE = 'eha_ros'
+HERE = os.path.dirname(os.path.realpath(__file__))   # colcon --symlink-install links it
+CONFIG = os.path.normpath(os.path.join(HERE, '..', '..', 'config'))   # the repository's config/
 
 
 def _registry():
     """eha_ros/core/config/registry.py (standard library only), read before the install."""
-    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), PACKAGE, 'core', 'config',
-                        'registry.py')
+    path = os.path.join(HERE, PACKAGE, 'core', 'config', 'registry.py')
     spec = importlib.util.spec_from_file_location('eha_registry', path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module        # dataclasses look their module up
     spec.loader.exec_module(module)
     return module
+
+
+def _config_files() -> list:
+    """data_files entries installing the repository's config/ (every file, subfolders kept) to
+    share/eha_ros/config, where eha_ros.core.config.params.default_config_dir finds it through
+    the ament index. Paths are relative to the folder setup.py runs in (colcon and pip run it
+    in src/eha_ros; install_data refuses absolute ones); none when config/ is not beside
+    (a source distribution)."""
+    if not os.path.isdir(CONFIG):
+        return []
+    entries = []
+    for folder, _, files in sorted(os.walk(CONFIG)):
+        names = sorted(f for f in files if not f.startswith('.'))
+        if names:
+            rel = os.path.relpath(folder, CONFIG)
+            target = os.path.normpath(os.path.join('share', PACKAGE, 'config', rel))
+            entries.append((target, [os.path.relpath(os.path.join(folder, f)) for f in names]))
+    return entries
 
 
 setup(
@@ -27,7 +46,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/launch', ['launch/eha_stack.launch.py']),
-    ],
+    ] + _config_files(),
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='EHA SIL maintainers',

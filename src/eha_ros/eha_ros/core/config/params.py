@@ -358,17 +358,59 @@ def override_arg(value: Any) -> str:
     return str(value)
 
 
-def default_config_dir() -> str:
-    """The repository's config/ folder (or $EHA_CONFIG_DIR)."""
-    env = os.environ.get('EHA_CONFIG_DIR')
-    if env:
-        return env
+CONFIG_ENV = 'EHA_CONFIG_DIR'
+PACKAGE = 'eha_ros'
+
+
+def checkout_config_dir() -> str:
+    """config/ of the repository this module would sit in as a checkout
+    (<repo>/src/eha_ros/eha_ros/core/config/params.py); it may not exist (installed)."""
     here = os.path.dirname(os.path.abspath(__file__))
-    for up in (3, 4):
-        cand = os.path.normpath(os.path.join(here, *(['..'] * up), 'config'))
-        if os.path.isdir(cand):
-            return cand
-    return os.path.join(os.getcwd(), 'config')
+    return os.path.normpath(os.path.join(here, *['..'] * 5, 'config'))
+
+
+def _is_checkout_config(path: str) -> bool:
+    root = os.path.dirname(path)
+    return os.path.isdir(path) and os.path.isfile(os.path.join(root, 'src', PACKAGE, 'setup.py'))
+
+
+def installed_config_dir() -> tuple[str | None, str]:
+    """(share/eha_ros/config of the installed package found through the ament index, or None;
+    what was looked at, for an error message). ament_index_python may be missing, or
+    AMENT_PREFIX_PATH unset or without eha_ros."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+    except ImportError:
+        return None, 'share/eha_ros/config (ament_index_python not importable)'
+    try:
+        share = get_package_share_directory(PACKAGE, print_warning=False)
+    except (LookupError, OSError, ValueError):      # PackageNotFoundError, AMENT_PREFIX_PATH unset
+        prefixes = os.environ.get('AMENT_PREFIX_PATH') or 'unset'
+        return None, f'share/eha_ros/config of the ament index (AMENT_PREFIX_PATH {prefixes})'
+    path = os.path.join(share, 'config')
+    return (path if os.path.isdir(path) else None), path
+
+
+def default_config_dir() -> str:
+    """The folder of the YAML files of config/: $EHA_CONFIG_DIR if set, else the repository's
+    config/ when running from a checkout, else share/eha_ros/config of the installed package
+    (colcon build, found through the ament index); else a ParamError (one line) naming the
+    three places looked at. Never the current folder's ./config."""
+    env = os.environ.get(CONFIG_ENV)
+    if env:
+        if not os.path.isdir(env):
+            raise ParamError(f'{CONFIG_ENV}={env}: no such folder (expected the folder with '
+                             f'plant.yaml and the other files of config/)')
+        return env
+    checkout = checkout_config_dir()
+    if _is_checkout_config(checkout):
+        return checkout
+    installed, looked = installed_config_dir()
+    if installed:
+        return installed
+    raise ParamError(f'config folder not found: ${CONFIG_ENV} is not set, {checkout} is not a '
+                     f'checkout\'s config/, no {looked}; set {CONFIG_ENV} or source the '
+                     f'install\'s setup.bash')
 
 
 # --ros-args flags that take a value (rcl arguments.c), and the log levels rcl accepts
