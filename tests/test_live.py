@@ -2,6 +2,7 @@
 client (eha_ros/tools/ws_client.py on `websockets`, subprotocol foxglove.websocket.v1)
 against a simultaneous DDS subscription, by seq."""
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -9,7 +10,7 @@ import sys
 import pytest
 
 from eha_ros.core.io.ws_subprotocol import CURRENT, LEGACY, rename_request, rename_response
-from ros_util import free_port, wait_for
+from ros_util import free_port, start_process, stop_process, wait_for
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 
@@ -140,9 +141,34 @@ def test_decimation_entries():
             decimation([bad])
 
 
+def test_services_allow_decides_by_bind_address_and_type():
+    """An acting service is offered on loopback with no allowlist, beyond loopback only when
+    a glob of live.services_allow names it; a read-only one always."""
+    from eha_ros.core.config.params import ParamError
+    from eha_ros.core.io.live_params import allow_patterns, is_loopback, service_offered
+    assert all(is_loopback(h) for h in ('127.0.0.1', '127.0.1.1', '::1', 'localhost'))
+    assert not any(is_loopback(h) for h in ('0.0.0.0', '::', '192.168.1.5', 'eha-pc'))
+    fault, get_state = 'eha_msgs/srv/InjectFault', 'lifecycle_msgs/srv/GetState'
+    assert allow_patterns(['']) == []
+    assert service_offered('/eha/inject_fault', fault, [], loopback=True)
+    assert not service_offered('/eha/inject_fault', fault, [], loopback=False)
+    assert not service_offered('/eha/x/change_state', 'lifecycle_msgs/srv/ChangeState', [],
+                               loopback=False)
+    assert service_offered('/eha/x/get_state', get_state, [], loopback=False)
+    only_switch = allow_patterns(['/eha/switch_channel'])
+    for loopback in (True, False):       # an allowlist is exact wherever bound
+        assert service_offered('/eha/switch_channel', 'eha_msgs/srv/SwitchChannel',
+                               only_switch, loopback)
+        assert not service_offered('/eha/inject_fault', fault, only_switch, loopback)
+    assert service_offered('/eha/bridge/arm', 'std_srvs/srv/SetBool', ['/eha/bridge/*'], False)
+    with pytest.raises(ParamError, match="live.services_allow: 'eha/switch_channel'"):
+        allow_patterns(['eha/switch_channel'])
+
+
 @pytest.mark.parametrize('param, text', [
     ("live:live.decimation:=['/eha/state:0']", "live.decimation: '/eha/state:0'"),
     ('live:live.port:=70000', 'live.port'),
+    ("live:live.services_allow:=['eha/*']", "live.services_allow: 'eha/*'"),
 ])
 def test_bad_parameters_are_one_line(param, text):
     res = subprocess.run(live_cmd(param), capture_output=True, text=True, timeout=60,
@@ -162,6 +188,98 @@ def test_port_in_use_is_one_line():
     lines = res.stderr.strip().splitlines()
     assert res.returncode == 2 and len(lines) == 1, res.stderr
     assert f'cannot serve on 127.0.0.1:{port}' in lines[0]
+
+
+# ---- which services a viewer is offered (live.services_allow) ---------------------------
+
+# the stack's acting services (plant side, bridge, switch manager) and a lifecycle transition
+ACTING = {'/eha/inject_fault': ('eha_msgs.srv', 'InjectFault'),
+          '/eha/switch_channel': ('eha_msgs.srv', 'SwitchChannel'),
+          '/eha/bridge/arm': ('std_srvs.srv', 'SetBool'),
+          '/eha/bridge/reset': ('std_srvs.srv', 'Trigger'),
+          '/eha/test_plant/change_state': ('lifecycle_msgs.srv', 'ChangeState')}
+READ_ONLY = {'/eha/test_plant/get_state': ('lifecycle_msgs.srv', 'GetState')}
+
+
+def serve_fakes(node):
+    """Every service of ACTING and READ_ONLY on ``node``, each answering its default
+    response (success where the response has it)."""
+    import importlib
+    for name, (module, kind) in {**ACTING, **READ_ONLY}.items():
+        cls = getattr(importlib.import_module(module), kind)
+
+        def answer(request, response):
+            if hasattr(response, 'success'):
+                response.success = True
+            return response
+        node.create_service(cls, name, answer)
+
+
+def advertised_after_discovery(client, expected, timeout=60.0):
+    """The services the client was offered once discovery has run: the ``expected`` are in,
+    then a few more discovery periods for anything else."""
+    client.wait_for(lambda: expected <= set(client.services), timeout,
+                    f'{sorted(expected)} advertised')
+    client.poll(2.0)
+    return set(client.services)
+
+
+@pytest.mark.parametrize('host, allow, offered', [
+    ('0.0.0.0', None, set()),
+    ('0.0.0.0', "['/eha/switch_channel']", {'/eha/switch_channel'}),
+    ('127.0.0.1', None, set(ACTING)),
+])
+def test_acting_services_offered_only_where_allowed(ros_node, host, allow, offered):
+    """The live node (own process, DDS) beside a node serving the stack's acting services and
+    a read-only one. Beyond loopback with no allowlist no acting service is advertised to the
+    WebSocket client; with live.services_allow exactly those named; on loopback every one,
+    as before. The read-only one always. Beyond loopback one WARN line names the exposure;
+    each withheld service is logged as not offered (found, not merely missed)."""
+    from eha_ros.tools.ws_client import FoxgloveClient
+    serve_fakes(ros_node)
+    port = free_port()
+    params = [f'live:live.host:={host}', f'live:live.port:={port}',
+              'live:live.discovery_period:=0.2']
+    params += [f'live:live.services_allow:={allow}'] if allow else []
+    proc = start_process(live_cmd(*params))
+    client = None
+    try:
+        client = FoxgloveClient(f'ws://127.0.0.1:{port}', timeout=60)
+        expected = offered | set(READ_ONLY)
+        assert advertised_after_discovery(client, expected) == expected
+        if allow:                                   # the allowed one is forwarded
+            assert client.call('/eha/switch_channel', {'channel': 1})['success']
+        if host == '127.0.0.1':
+            check_parameter_set_refused(client, ros_node)
+    finally:
+        if client:
+            client.close()
+        code, out, err = stop_process(proc)
+    log = (out + err).splitlines()
+    assert code == 0, err[-2000:]
+    withheld = {m.group(1) for m in map(re.compile(r'\]: (/\S+) \[\S+\]: not offered').search,
+                                        log) if m}
+    assert withheld == set(ACTING) - offered, log
+    warns = [ln for ln in log if '[WARN]' in ln]
+    if host == '127.0.0.1':
+        assert not [w for w in warns if 'reachable' in w], warns
+        return
+    assert len(warns) == 1, warns
+    assert f'live: ws://0.0.0.0:{port} is reachable from other machines: anyone who ' \
+           f'connects gets /eha/* + /diagnostics; ' in warns[0]
+    assert ('those matching /eha/switch_channel' if allow else
+            'read-only: no service that acts on the actuator is offered') in warns[0]
+
+
+def check_parameter_set_refused(client, node):
+    """A parameter set from the viewer is refused by the live node itself, even one the node
+    would accept (use_sim_time): the value reads back unchanged, the viewer gets an error
+    status."""
+    name = f'{node.get_name()}:use_sim_time'
+    assert client.set_parameters({name: True}) == {name: False}
+    assert node.get_parameter('use_sim_time').value is False
+    status = [t for t in client.texts if t.get('op') == 'status']
+    assert status and 'read-only' in status[-1]['message'], client.texts[-3:]
 
 
 # ---- the whole stack over DDS and WebSocket ----------------------------------------------

@@ -107,6 +107,8 @@ def test_a_node_that_dies_is_reported(tmp_path):
     (['--sweep', '--experiment', 'leakage'], 'give one'),
     (['--plant', 'mock', '--plant-params', 'config/plant.yaml'], 'expected --plant sim'),
     (['--plant-params', 'config/plant_sim.yaml'], 'sim_node.'),
+    (['-p', 'live:live.port:=9123'], 'the live node is not started: add --live'),
+    (['--live', '-p', "live:live.services_allow:=['eha/*']"], "live.services_allow: 'eha/*'"),
 ])
 def test_bad_options_are_one_line(tmp_path, args, expect):
     r, folder, summary = run_stack(tmp_path, *args, timeout=60)
@@ -114,6 +116,28 @@ def test_bad_options_are_one_line(tmp_path, args, expect):
     lines = [ln for ln in r.stderr.splitlines() if not ln.startswith('setup:')]
     assert len(lines) == 1 and expect in lines[0], r.stderr
     assert summary is None
+
+
+def test_live_node_takes_its_parameters_with_live():
+    """-p live:... reaches the live node with --live (or --live-port), as for every node;
+    its port sets the live view's (--live-port wins); without --live it is refused in one
+    line that says to add --live."""
+    from eha_ros.core.config.cli import UsageError
+    from eha_ros.tools.run_stack import build_stack, live_lines, parse, plan
+    argv = ['-p', 'live:live.port:=9123', '-p', 'live:live.host:=0.0.0.0']
+    for live in (['--live'], ['--live-port', '9124']):
+        args = parse(live + argv)
+        p = plan(args)
+        assert p['extra']['live'] == ['-p', argv[1], '-p', argv[3]]
+        assert p['live'] == (9123 if live == ['--live'] else 9124)
+        cmd = build_stack(args, p).commands()['eha_loop']
+        assert cmd[-4:] == ['-p', argv[3], '-p', f'live:live.port:={p["live"]}'], cmd
+        lines = live_lines(p['live_params'])
+        assert len(lines) == 2 and 'WARN: live: ws://0.0.0.0:' in lines[1], lines
+    assert 'WARN' not in ' '.join(live_lines(plan(parse(['--live']))['live_params']))
+    with pytest.raises(UsageError) as err:
+        plan(parse(argv))
+    assert '\n' not in str(err.value) and 'add --live' in str(err.value)
 
 
 def test_plant_swapped_for_the_bridge_and_the_ads_test_peer(tmp_path):

@@ -10,11 +10,14 @@ queued, and handed to the server in one burst every ``live.flush_period``;
 ``live.decimation`` keeps every N-th message of a topic. log time = the message's header stamp (sim time in lock-step, where
 the newest stamp is also broadcast as the server time), else receive time.
 
-The services under the namespace (/eha/inject_fault, /eha/switch_channel, /eha/bridge/arm, ...)
-are offered to the viewer with JSON requests and responses, each call forwarded to the ROS
-service; the node parameters of the stack appear in the viewer's parameter panel as
-``node:name`` (read and set through each node's rcl_interfaces services). Counts per topic,
-clients and forwarded calls go to /diagnostics.
+The services under the namespace are offered to the viewer with JSON requests and responses,
+each call forwarded to the ROS service: the read-only ones always, those that act on the
+actuator (/eha/inject_fault, /eha/switch_channel, /eha/bridge/arm, ...) as
+``live.services_allow`` says (default: all when bound to loopback, none beyond it, where one
+WARN line at start-up names what is exposed). The node parameters of the stack appear in the
+viewer's parameter panel as ``node:name``, read through each node's rcl_interfaces services;
+setting one from the viewer is refused here. Counts per topic, clients and forwarded calls
+go to /diagnostics.
 """
 from __future__ import annotations
 
@@ -30,7 +33,8 @@ from rclpy.clock import Clock, ClockType
 from rclpy.serialization import serialize_message
 
 from ..core.io import cdr
-from ..core.io.live_params import SCHEMA, decimation
+from ..core.io.live_params import (SCHEMA, allow_patterns, decimation, exposure, is_loopback,
+                                   served_topics, service_offered)
 from ..core.io.mcap_sink import stamp_ns
 from ..core.config.params import ParamError
 from ..core.io.ws_subprotocol import SubprotocolRelay
@@ -112,6 +116,8 @@ class Live:
         super().__init__('live')
         self.p = p = declare_and_validate(self, SCHEMA, params)
         self.every = decimation(p['live.decimation'])
+        self.allow = allow_patterns(p['live.services_allow'])
+        self.loopback = is_loopback(p['live.host'])
         extra = {t for t in p['live.extra_topics'] if t}
         if p['live.diagnostics']:
             extra.add('/diagnostics')
@@ -158,11 +164,12 @@ class Live:
             self.flusher = threading.Thread(target=self.flush_every_period,
                                             name='live-flush', daemon=True)
             self.flusher.start()
+        url = f'ws://{p["live.host"]}:{self.port}'
         self.get_logger().info(
-            f'live: ws://{p["live.host"]}:{self.port} (foxglove.websocket.v1 / '
-            f'foxglove.sdk.v1) serving '
-            f'{self.tap.ns}/*{" + " if extra else ""}{", ".join(sorted(extra))}'
-            + (f', decimated {self.every}' if self.every else ''))
+            f'live: {url} (foxglove.websocket.v1 / foxglove.sdk.v1) serving '
+            f'{served_topics(p)}' + (f', decimated {self.every}' if self.every else ''))
+        if not self.loopback:                 # said once: who can reach it, what they get
+            self.get_logger().warning(exposure(p, url))
         self.discover()
 
     # ---- topics
@@ -248,28 +255,46 @@ class Live:
 
     # ---- services: JSON from the viewer -> ROS service -> JSON back
     def discover_services(self):
+        """Offer each new service under the namespace the viewer may call (decided once per
+        name: live_params.service_offered)."""
         new = []
         for name, types in self.get_service_names_and_types():
             if name in self.forwarded or not self.tap.wanted(name) or \
                     name.startswith(f'/{self.get_name()}/'):
                 continue
-            pkg, _, srv = (types[0].split('/') + ['', ''])[:3]
-            try:
-                cls = getattr(importlib.import_module(f'{pkg}.srv'), srv)
-            except (ImportError, AttributeError):
-                self.forwarded[name] = None
-                self.get_logger().warning(f'{name}: service type {types[0]} not installed: '
-                                          f'not offered')
+            self.forwarded[name] = None        # withheld unless offered below
+            if not service_offered(name, types[0], self.allow, self.loopback):
+                self.get_logger().info(f'{name} [{types[0]}]: not offered (acts on the '
+                                       f'actuator; {self._withheld_because()})')
                 continue
-            self.forwarded[name] = (self.create_client(cls, name), cls)
-            schema = foxglove.ServiceSchema(
-                name=types[0],
-                request=self._json_schema(f'{pkg}/srv/{srv}_Request', cls.Request),
-                response=self._json_schema(f'{pkg}/srv/{srv}_Response', cls.Response))
-            new.append(foxglove.Service(name, schema=schema, handler=self.call_service))
-            self.get_logger().info(f'serving service {name} [{types[0]}] (JSON)')
+            service = self._offer(name, types[0])
+            if service is not None:
+                new.append(service)
         if new:
             self.server.add_services(new)
+
+    def _withheld_because(self) -> str:
+        if self.allow:
+            return 'live.services_allow does not name it'
+        return f'bound to {self.p["live.host"]}, beyond loopback, with no live.services_allow'
+
+    def _offer(self, name, type_name):
+        """The foxglove Service forwarding to ROS service ``name``; None (warned) when its
+        type is not installed here."""
+        pkg, _, srv = (type_name.split('/') + ['', ''])[:3]
+        try:
+            cls = getattr(importlib.import_module(f'{pkg}.srv'), srv)
+        except (ImportError, AttributeError):
+            self.get_logger().warning(f'{name}: service type {type_name} not installed: '
+                                      f'not offered')
+            return None
+        self.forwarded[name] = (self.create_client(cls, name), cls)
+        schema = foxglove.ServiceSchema(
+            name=type_name,
+            request=self._json_schema(f'{pkg}/srv/{srv}_Request', cls.Request),
+            response=self._json_schema(f'{pkg}/srv/{srv}_Response', cls.Response))
+        self.get_logger().info(f'serving service {name} [{type_name}] (JSON)')
+        return foxglove.Service(name, schema=schema, handler=self.call_service)
 
     @staticmethod
     def _json_schema(name, cls):
@@ -288,6 +313,8 @@ class Live:
         text goes back to the viewer as the error."""
         name = request.service_name
         try:
+            if not self.forwarded.get(name):
+                raise RuntimeError(f'{name}: not offered by this live view')
             client, cls = self.forwarded[name]
             data = json.loads(request.payload or b'{}')
             ros_request = from_dict(cls.Request, data)
@@ -348,25 +375,20 @@ class Live:
             return []
 
     def set_parameters_from(self, parameters):
-        from rcl_interfaces.srv import SetParameters
-        from rclpy.parameter import Parameter
+        """Refused, every one, without reaching the node (use_sim_time and any parameter a
+        node left writable would change the running stack): an error status, and the
+        current values back."""
         out = []
         for par in parameters:
             node, _, name = par.name.partition(':')
+            self.server.publish_status(f'{par.name}: not set: parameters are read-only in '
+                                       f'the live view', foxglove.StatusLevel.Error)
+            self.get_logger().warning(f'parameter {par.name} from the viewer: refused '
+                                      f'(read-only)')
             try:
-                value = par.get_value()
-                req = SetParameters.Request(
-                    parameters=[Parameter(name, value=value).to_parameter_msg()])
-                res = self._wait(self._param_client(node, 'SetParameters')
-                                 .call_async(req)).results[0]
-                if not res.successful:
-                    raise RuntimeError(res.reason or 'refused')
-                self.get_logger().info(f'parameter {par.name} := {value!r} from the viewer')
+                out += self._get(node, [name]) if node else []
             except Exception as err:
-                self.server.publish_status(f'{par.name}: not set: {err}',
-                                           foxglove.StatusLevel.Error)
-                self.get_logger().warning(f'parameter {par.name} from the viewer: {err}')
-            out += self._get(node, [name]) if node else []
+                self.get_logger().warning(f'parameter {par.name}: {err}')
         return out
 
     # ---- diagnostics, shutdown

@@ -35,7 +35,7 @@ import time
 
 from ..core.config.cli import UsageError, guarded, interrupt_on_signals, require_seconds, stopping
 from ..core.config.registry import LOOP_NODES as LOOP, LOOP_PREFIX
-from ..core.config.params import default_config_dir, override_arg
+from ..core.config.params import default_config_dir, override_arg, parse_ros_args
 from ..core.ident.experiments import KINDS
 from ..core.io.report import reserve_json, run_dir, write_json
 
@@ -93,7 +93,10 @@ def parse(argv):
                          'protocol (live node, config/live.yaml): open ws://localhost:PORT in '
                          'Foxglove or Lichtblick, layout config/foxglove/eha_layout.json')
     ap.add_argument('--live-port', type=int, default=None, metavar='PORT',
-                    help='port of --live (default 8765, from config/live.yaml); implies --live')
+                    help='port of --live (default 8765, from config/live.yaml); implies --live. '
+                         'The live node takes -p live:KEY:=VALUE like every node, e.g. -p '
+                         'live:live.host:=0.0.0.0 (beyond loopback read-only unless '
+                         'live.services_allow names the services a viewer may call)')
     ap.add_argument('--no-peer', action='store_true',
                     help='--plant bridge: do not start the ADS test peer (a real PLC answers at '
                          'ads.host/ads.tcp_port)')
@@ -150,15 +153,7 @@ def plan(args) -> dict:
         nodes.append('sweep')
     if args.experiment:
         nodes.append('experiment')
-    extra: dict = {}
-    for item in args.params:
-        node, sep, rest = item.partition(':')
-        if not sep or ':=' not in rest:
-            raise UsageError(f'-p {item!r}: expected node:key:=value')
-        if node not in nodes:
-            raise UsageError(f'-p {item!r}: node {node!r} is not in this stack '
-                             f'({", ".join(nodes)})')
-        extra.setdefault(node, []).extend(['-p', item])
+    extra = node_overrides(args.params, nodes, live=args.live or args.live_port is not None)
     if args.experiment:
         extra.setdefault('experiment', [])[:0] = [
             '-p', f'experiment:experiment.kind:={args.experiment}', '-p',
@@ -170,6 +165,7 @@ def plan(args) -> dict:
         extra.setdefault(plant, [])[:0] = plant_overrides(args.plant_params, args.config)
     if args.live_port is not None and not 0 <= args.live_port <= 65535:
         raise UsageError(f'--live-port {args.live_port}: expected 0..65535')
+    live = live_params(args, extra.get('live', ()))
     if args.no_peer and args.plant != 'bridge':
         raise UsageError('--no-peer only applies to --plant bridge')
     peer = args.plant == 'bridge' and not args.no_peer
@@ -183,7 +179,25 @@ def plan(args) -> dict:
         extra.setdefault(plant, []).extend(
             ['-p', f'{plant}:{LOOP_PREFIX[plant]}.lockstep_from_activation:=false'])
     return {'peer': peer, 'nodes': nodes, 'structure': structure, 'extra': extra, 'plant': plant,
-            'managed': [n for n in (plant, 'controller') if n in nodes], 'activate': activate}
+            'managed': [n for n in (plant, 'controller') if n in nodes], 'activate': activate,
+            'live': live['live.port'] if live else None, 'live_params': live}
+
+
+def node_overrides(params, nodes, live: bool) -> dict:
+    """-p node:key:=value items -> {node: ['-p', item, ...]}; the live node's only with
+    ``live`` (--live or --live-port). Raises UsageError (one line)."""
+    extra: dict = {}
+    for item in params:
+        node, sep, rest = item.partition(':')
+        if not sep or ':=' not in rest:
+            raise UsageError(f'-p {item!r}: expected node:key:=value')
+        if node == 'live' and not live:
+            raise UsageError(f'-p {item!r}: the live node is not started: add --live')
+        if node not in nodes and node != 'live':
+            raise UsageError(f'-p {item!r}: node {node!r} is not in this stack '
+                             f'({", ".join(nodes + ["live"] if live else nodes)})')
+        extra.setdefault(node, []).extend(['-p', item])
+    return extra
 
 
 def plant_overrides(path: str, config_dir: str) -> list[str]:
@@ -214,18 +228,36 @@ def build_stack(args, p: dict, out: str | None = None, managed: bool = False):
                  log_dir=os.path.join(out, 'logs') if out else None,
                  lockstep=args.mode == 'lockstep', composed=p['structure'] == 'composed',
                  record=os.path.join(out, 'recording.mcap') if args.record and out else None,
-                 ads_peer=p['peer'], live=live_port(args))
+                 ads_peer=p['peer'], live=p['live'])
 
 
-def live_port(args) -> int | None:
-    """--live / --live-port -> the live node's port (None: no live node)."""
-    if args.live_port is not None:
-        return args.live_port
-    if not args.live:
+def live_params(args, live_args=()) -> dict | None:
+    """--live / --live-port -> the live node's parameters (None: no live node), from
+    config/live.yaml and ``live_args`` (its -p items), live.port from --live-port if given.
+    Checked here: a bad one is one line before anything starts."""
+    if args.live_port is None and not args.live:
         return None
     from ..core.sim.batch import node_params
     from ..core.io.live_params import SCHEMA
-    return node_params('live', SCHEMA, args.config)['live.port']
+    _, overrides, _, _ = parse_ros_args(['--ros-args', *live_args])
+    p = node_params('live', SCHEMA, args.config, overrides)
+    if args.live_port is not None:
+        p['live.port'] = args.live_port
+    return p
+
+
+def live_lines(p: dict) -> list[str]:
+    """What run_stack prints about the live view: where, and beyond loopback what anyone
+    who connects gets (the live node's WARN line, also in its process's log)."""
+    from ..core.io.live_params import exposure, is_loopback
+    host, port = p['live.host'], p['live.port']
+    where = 'localhost' if is_loopback(host) or host in ('0.0.0.0', '::') else host
+    where = f'[{where}]' if ':' in where else where
+    lines = [f'run_stack: live view on ws://{where}:{port} (Foxglove/Lichtblick: open '
+             f'connection, Foxglove WebSocket; layout config/foxglove/eha_layout.json)']
+    if not is_loopback(host):
+        lines.append('run_stack: WARN: ' + exposure(p, f'ws://{host}:{port}'))
+    return lines
 
 
 def launch_entries(argv) -> list[tuple[str, str, list[str]]]:
@@ -343,10 +375,8 @@ def run(args, signals=()) -> int:
     stack.start()
     print(f'run_stack: {args.mode}, {p["structure"]}: started '
           f'{", ".join(stack.procs)} (logs in {logs}/)', flush=True)
-    if stack.live is not None:
-        print(f'run_stack: live view on ws://localhost:{stack.live} (Foxglove/Lichtblick: open '
-              f'connection, Foxglove WebSocket; layout config/foxglove/eha_layout.json)',
-              flush=True)
+    for line in live_lines(p['live_params']) if p['live_params'] else ():
+        print(line, flush=True)
     cpu = CpuMeter(stack.procs)
     t_start = time.monotonic()
     reason = 'duration'
