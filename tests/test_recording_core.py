@@ -115,3 +115,19 @@ def test_unfinished_recording_reads_up_to_the_cut(tmp_path):
     assert 50 < len(got) < 500 and got == list(range(len(got)))
     with pytest.raises(UsageError, match='no summary|not a readable'):
         recording.summary(str(cut))
+
+
+def test_seq_coverage_counts_messages_and_missing_seqs(tmp_path):
+    # a long soak's recording is streamed, not loaded: 6 states of seq 10..17 with 13 and 15
+    # missing -> 6 messages, 2 gaps (the order in the file does not matter)
+    cls = msgdefs.message_class('eha_msgs/msg/ActuatorState')
+    name = 'eha_msgs/msg/ActuatorState'
+    sink = McapSink(str(tmp_path / 's.mcap'))
+    cid = sink.add_topic('/eha/state', name, msgdefs.definition(name), msgdefs.header_first(cls))
+    for t, seq in enumerate((10, 11, 12, 14, 17, 16)):
+        msg = cls()
+        msg.seq = seq
+        sink.put(cid, t, serialize(msg))
+    sink.close()
+    assert recording.seq_coverage(str(tmp_path / 's.mcap'), '/eha/state') == (6, 2)
+    assert recording.seq_coverage(str(tmp_path / 's.mcap'), '/eha/command') == (0, 0)

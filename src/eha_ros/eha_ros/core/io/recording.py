@@ -75,6 +75,17 @@ def read(path: str, topics: Iterable[str] | None = None) -> dict[str, list[tuple
     return dict(out)
 
 
+def seq_coverage(path: str, topic: str) -> tuple[int, int]:
+    """(messages, seq gaps) of a topic whose messages carry ``seq``, streamed (a long recording
+    is never held in memory): gaps = seq values missing between the first and the last."""
+    n, lo, hi = 0, None, None
+    for _, _, msg in _iterate(path, [topic]):
+        n += 1
+        lo = msg.seq if lo is None else min(lo, msg.seq)
+        hi = msg.seq if hi is None else max(hi, msg.seq)
+    return n, (hi - lo + 1 - n) if n else 0
+
+
 class Record(NamedTuple):
     """One recorded message: times in ns, the decoded message and its CDR bytes."""
     log_time: int
