@@ -43,13 +43,14 @@ def _wait_running(stack, monitor, timeout: float = 90.0) -> None:
         time.sleep(0.1)
 
 
-def _progress(elapsed: float, d0: dict, d: dict, pids: dict) -> str:
+def _progress(elapsed: float, d0: dict, d: dict, pids: dict, cores: dict) -> str:
     ticks = d.get('ticks', 0) - d0.get('ticks', 0)
     lost = d.get('commands_not_for_previous_tick', 0) - d0.get('commands_not_for_previous_tick', 0)
     over = d.get('overruns', 0) - d0.get('overruns', 0)
     rss = ', '.join(f'{n} {rss_bytes(p) / 2**20:.0f} MB' for n, p in pids.items())
+    cpu = ', '.join(f'{n} {c:.2f}' for n, c in cores.items())
     return (f'bench soak: {elapsed:6.0f} s: ticks {ticks}, lost {lost}, overruns {over}; '
-            f'RSS {rss}')
+            f'RSS {rss}; cores over the last interval {cpu}')
 
 
 def _recording_figures(path: str, wall: float) -> dict:
@@ -80,14 +81,16 @@ def soak(duration: float, log=print) -> dict:
             cpu0 = {n: cpu_seconds(p) for n, p in pids.items()}
             d0, t0 = monitor.next_after('plant_sim: loop', time.monotonic())
             log(f'bench soak: loop running; {duration:g} s from now ({", ".join(pids)})')
-            next_line = t0 + PROGRESS_S
+            next_line, last = t0 + PROGRESS_S, (t0, cpu0)
             while time.monotonic() < t0 + duration:
                 if stack.dead():
                     raise RuntimeError(f'a process exited during the soak: {stack.dead()}')
                 time.sleep(min(1.0, max(0.0, t0 + duration - time.monotonic())))
                 if time.monotonic() >= next_line:
-                    log(_progress(time.monotonic() - t0, d0, _loop(monitor), pids))
-                    next_line += PROGRESS_S
+                    now, cpu = time.monotonic(), {n: cpu_seconds(p) for n, p in pids.items()}
+                    cores = {n: (cpu[n] - last[1][n]) / (now - last[0]) for n in pids}
+                    log(_progress(now - t0, d0, _loop(monitor), pids, cores))
+                    next_line, last = next_line + PROGRESS_S, (now, cpu)
             d1, t1 = monitor.next_after('plant_sim: loop', t0 + duration - 0.5)
             rss1 = {n: rss_bytes(p) for n, p in pids.items()}
             cpu1 = {n: cpu_seconds(p) for n, p in pids.items()}

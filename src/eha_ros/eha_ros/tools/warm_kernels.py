@@ -6,8 +6,7 @@ Each kernel is compiled by running the code path that uses it, for a few ticks, 
 types the stack passes: the closed loop tick by tick (what each node's core object runs) and
 in compiled segments (campaigns, batch), with the switch manager, a commanded switch and a
 motor fault; the estimator's real-time branches (lost and stale states); the identification's
-replays. It prints how many kernels numba compiled (0 when
-the cache already held them all).
+replays. It prints how many kernels numba compiled (0 when the cache already held them all).
 
 usage: python -m eha_ros.tools.warm_kernels [--quiet]
 """
@@ -34,7 +33,7 @@ def _realtime() -> None:
     from ..core.estimator.params import SCHEMA
     from ..core.sim.batch import node_params
     est = Estimator(node_params('estimator', SCHEMA))
-    for k in range(20):
+    for _ in range(20):
         est.update(0.0, (0.0, 0.0), 5e5, 5e5, 0)
     est.update(0.0, (0.0, 0.0), 5e5, 5e5, 0, ticks=3)
     est.predict_only()
