@@ -14,7 +14,8 @@ import os
 import tempfile
 import time
 
-NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
+from .stack import NODES, wait_running
+
 PROGRESS_S = 60.0
 
 
@@ -32,15 +33,6 @@ def rss_bytes(pid: int) -> int:
 
 def _loop(monitor) -> dict:
     return monitor.find('plant_sim: loop')
-
-
-def _wait_running(stack, monitor, timeout: float = 90.0) -> None:
-    end = time.monotonic() + timeout
-    while _loop(monitor).get('ticks', 0) < 100:
-        if time.monotonic() > end or stack.dead():
-            raise RuntimeError(f'the loop did not start within {timeout:g} s '
-                               f'(exited: {stack.dead()})')
-        time.sleep(0.1)
 
 
 def _progress(elapsed: float, d0: dict, d: dict, pids: dict, cores: dict) -> str:
@@ -75,7 +67,7 @@ def soak(duration: float, log=print) -> dict:
         path = os.path.join(tmp, 'soak.mcap')
         stack = Stack(NODES, composed=True, record=path, log_dir=os.path.join(tmp, 'logs')).start()
         try:
-            _wait_running(stack, monitor)
+            wait_running(stack, monitor)
             pids = {n: p.pid for n, p in stack.procs.items()}
             rss0 = {n: rss_bytes(p) for n, p in pids.items()}
             cpu0 = {n: cpu_seconds(p) for n, p in pids.items()}

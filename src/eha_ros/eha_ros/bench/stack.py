@@ -30,11 +30,7 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
                   live=port).start()
     viewer = None
     try:
-        end = time.monotonic() + 90
-        while monitor.find('plant_sim: loop').get('ticks', 0) < 100:
-            if time.monotonic() > end or stack.dead():
-                raise RuntimeError(f'the loop did not start within 90 s (exited: {stack.dead()})')
-            time.sleep(0.1)
+        wait_running(stack, monitor)
         idle = {}
         if live:
             time.sleep(warmup)
@@ -77,6 +73,17 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
             if key in values:
                 out[f'{node}_{key}'] = values[key]
     return out
+
+
+def wait_running(stack, monitor, timeout: float = 90.0) -> None:
+    """Block until the plant side has reported 100 ticks on /diagnostics; RuntimeError when
+    it does not within ``timeout`` s or a process of the stack exits."""
+    end = time.monotonic() + timeout
+    while monitor.find('plant_sim: loop').get('ticks', 0) < 100:
+        if time.monotonic() > end or stack.dead():
+            raise RuntimeError(f'the loop did not start within {timeout:g} s '
+                               f'(exited: {stack.dead()})')
+        time.sleep(0.1)
 
 
 def _free_port() -> int:
