@@ -14,6 +14,13 @@ eq. 3.33 falls with speed (down to about 3 v_s), a negative damping that excites
 the samples the ringing spoils are those that place F_c and v_s. Samples slower than V_MIN are
 left out: there the piston sticks and the pressure force is whatever the loop holds, not the
 velocity's friction (eq. 3.33 is regularised at v_s/10 and says nothing about sticking).
+
+A parameter the fit drives onto its bound (mu, when the clean samples stop at low speed: the
+viscous term is then a few tens of newtons the Coulomb level absorbs) is not determined by the
+data: it is held at its nominal value and the others are fitted again without it, their
+intervals widened by how far they move when the held one is set anywhere in HELD_RANGE of its
+nominal value (refits at both ends). The curve then is what the data showed given the held one,
+not a mix of a fit of four and nominal values.
 """
 from __future__ import annotations
 
@@ -21,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from ..plant.friction import friction
-from .fit import least_squares_fit
+from .fit import Estimate, least_squares_fit
 
 WINDOW = 21             # [ticks] Savitzky-Golay window of the position derivatives
 V_MIN = 0.004           # [m/s] slower samples are left out (sticking)
@@ -33,6 +40,8 @@ MODEL_ERROR = {'F_c': 0.06, 'F_s': 0.06, 'v_s': 0.06, 'mu': 0.18}
                         # Stribeck hump (v_s +5 %, F_c -2 % on the plant's own recordings); mu
                         # carries what is left of the ringing's average (up to +14 % on twelve
                         # plants, docs/identification.md: mu v is a sixth of the force)
+HELD_RANGE = (0.5, 2.0)  # multipliers of a held parameter's nominal value the intervals of the
+                        # others cover (issue 43's family: mu and v_s x0.5-x2)
 MIN_SAMPLES = 500       # fewer usable samples: nothing is fitted
 QUIET = 10              # [%] percentile of the force's ringing taken as its quiet level
 RINGING = 1.5           # samples ringing above this x the quiet level are left out (3 x the
@@ -76,16 +85,48 @@ def identify(rec, p, log=print) -> dict:
         return _unidentified(p, f'{len(vk)} usable samples (moving faster than {V_MIN} m/s '
                                 f'without ringing): expected at least {MIN_SAMPLES}')
     nominal = np.array([getattr(p, n) for n in FITTED])
+    groups = np.nonzero(keep)[0] // 250
 
     def residual(x):
         c = x * nominal
         return curve(vk, c[0], c[1], c[2], c[3]) - fk
 
-    fit = least_squares_fit(residual, np.ones(4), FITTED, [1e-3] * 4, [50.0] * 4,
-                            np.nonzero(keep)[0] // 250)
-    est = {f'friction.{n}': fit.estimate(n, getattr(p, n), getattr(p, n), floor=MODEL_ERROR[n])
-           for n in FITTED}
-    c = fit.x * nominal
+    def fit_free(free: list, held: dict):
+        """Fit the multipliers of ``free``, the others at ``held`` (name -> multiplier)."""
+        idx = [FITTED.index(n) for n in free]
+        base = np.array([held.get(n, 1.0) for n in FITTED])
+
+        def sub(xf):
+            x = base.copy()
+            x[idx] = xf
+            return residual(x)
+        return least_squares_fit(sub, np.ones(len(free)), free, [1e-3] * len(free),
+                                 [50.0] * len(free), groups)
+
+    free, held = list(FITTED), {}
+    fit = fit_free(free, held)
+    while fit.at_bound and len(free) > len(fit.at_bound):
+        held.update({n: 1.0 for n in fit.at_bound})
+        free = [n for n in free if n not in held]
+        fit = fit_free(free, held)
+    spread = np.zeros(len(free))
+    if held and not fit.at_bound:
+        for m in HELD_RANGE:            # the free ones' shift over the held one's range
+            other = fit_free(free, {n: m for n in held})
+            spread = np.maximum(spread, np.abs(other.x - fit.x) / np.abs(fit.x))
+    note = f'{", ".join(held)} held at nominal (fit ended on its bound)' if held else ''
+    est = {f'friction.{n}': fit.estimate(
+        n, getattr(p, n), getattr(p, n), note=note,
+        floor=float(np.hypot(MODEL_ERROR[n], spread[free.index(n)])))
+        for n in free}
+    for n in held:
+        est[f'friction.{n}'] = Estimate(
+            getattr(p, n), None, None, getattr(p, n), False,
+            f'not determined by the data: the fit drove it to its bound; held at nominal, '
+            f'{", ".join(free)} fitted again')
+    x = np.array([held.get(n, 1.0) for n in FITTED])
+    x[[FITTED.index(n) for n in free]] = fit.x
+    c = x * nominal
     log(f'identify: friction: F_c {c[0]:.0f} N, F_s {c[1]:.0f} N, v_s {c[2] * 1e3:.1f} mm/s, '
         f'mu {c[3]:.0f} N s/m ({len(vk)} samples up to {np.max(np.abs(vk)):.3f} m/s, force '
         f'residual {fit.residual_rms:.0f} N)')
@@ -94,7 +135,7 @@ def identify(rec, p, log=print) -> dict:
     full = [(idx == b).sum() for b in range(BINS)]
     centres = [vk[idx == b].mean() for b in range(BINS) if full[b] >= 5]
     means = [fk[idx == b].mean() for b in range(BINS) if full[b] >= 5]
-    return {'estimates': est, 'fit': fit, 'values': dict(zip(FITTED, c.tolist())),
+    return {'estimates': est, 'fit': fit, 'values': dict(zip(FITTED, c.tolist())), 'held': held,
             'data': {'velocity': vk, 'force': fk, 'bin_velocity': np.array(centres),
                      'bin_force': np.array(means)},
             'force_rmse_n': {'identified': fit.residual_rms,
@@ -102,7 +143,6 @@ def identify(rec, p, log=print) -> dict:
 
 
 def _unidentified(p, why: str) -> dict:
-    from .fit import Estimate
     est = {f'friction.{n}': Estimate(getattr(p, n), None, None, getattr(p, n), False,
                                      f'not determined by the data: {why}') for n in FITTED}
     return {'estimates': est, 'fit': None, 'values': {n: getattr(p, n) for n in FITTED},

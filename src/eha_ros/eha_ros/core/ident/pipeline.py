@@ -86,7 +86,8 @@ def fit_recordings(paths: list[str], out_dir: str, config_dir: str | None = None
     wall['validation_s'] = time.perf_counter() - t0
     result = {
         'parameters': {name: e.as_dict() for name, e in sorted(params.items())},
-        'validation': {key: v[key] for key in ('position_rmse_m', 'motor_speed_rmse_rad_s')},
+        'validation': {key: v[key] for key in ('seeds', 'position_rmse_m',
+                                               'motor_speed_rmse_rad_s')},
         'drive_sweep': {'motor_speed_rmse_rad_s': d['speed_rmse_rad_s'],
                         'motor_speed_max_error_rad_s': d['speed_max_error_rad_s'],
                         'delay_cost': {str(t): c for t, c in sorted(d['delay_cost'].items())}},
