@@ -183,7 +183,7 @@ def write(out_dir: str, result: dict, d: dict, f: dict, k: dict, v: dict, p) -> 
     for m in ('nominal', 'identified', 'floor'):
         lines.append(f'| {m} | {pos[m] * 1e6:.1f} | {spd[m] * RPM:.1f} |')
     lines.append('| excess | ' + ' | '.join(
-        f'{q["excess"]:.2f}' if q['judged'] else 'not judged (nominal near the floor)'
+        f'{q["excess"]:.2f}' if q['judged'] else 'not judged (nominal within 2x the floor)'
         for q in (pos, spd)) + ' |')
     shaky = sorted({m for q in (pos, spd) for m, ok in q['repeatable'].items() if not ok})
     if shaky:
