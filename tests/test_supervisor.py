@@ -221,3 +221,20 @@ def _cfg(name):
     import os
     from eha_ros.core.config.params import default_config_dir
     return os.path.join(default_config_dir(), name)
+
+
+def test_saturated_share_is_the_share_of_saturated_commands_in_the_window():
+    """Kept as a running count (diagnostics read it beside the loop thread: no iteration)."""
+    import numpy as np
+    sup = LoopSupervisor(params())
+    limit = sup.p.saturation * sup.p.omega_max
+    rng = np.random.default_rng(3)
+    signs = []
+    for seq in range(3 * sup.n):
+        speed = float(rng.choice([-1.5, -0.5, 0.0, 0.5, 1.5])) * limit
+        sup.command(seq, speed, 0.0)
+        signs.append((speed >= limit) - (speed <= -limit))
+        if seq % 97 == 0:
+            window = signs[-sup.n:]
+            assert sup.saturated_share == pytest.approx(sum(1 for s in window if s) / sup.n)
+    assert len(sup.sat) == sup.n

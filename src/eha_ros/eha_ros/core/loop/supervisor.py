@@ -83,7 +83,8 @@ class LoopSupervisor:
         self.last_check = now
         self.answered = deque()                # per tick: command(k) before state(k+1)
         self.n_answered = 0
-        self.sat = deque(maxlen=self.n)        # per command: -1, 0, +1 (saturated sign)
+        self.sat = deque()                     # per command: -1, 0, +1 (saturated sign)
+        self.n_sat = 0                         # saturated commands in self.sat
         self.reversals = deque()               # command seq of each saturated sign reversal
         self.last_sat_sign = 0
         self.rejected_run = 0
@@ -122,6 +123,9 @@ class LoopSupervisor:
         limit = self.p.saturation * self.p.omega_max
         sign = (speed >= limit) - (speed <= -limit)
         self.sat.append(sign)
+        self.n_sat += sign != 0
+        if len(self.sat) > self.n:
+            self.n_sat -= self.sat.popleft() != 0
         if sign:
             if self.last_sat_sign and sign != self.last_sat_sign:
                 self.reversals.append(seq)
@@ -195,7 +199,7 @@ class LoopSupervisor:
 
     @property
     def saturated_share(self) -> float:
-        return sum(1 for s in self.sat if s) / self.n
+        return self.n_sat / self.n
 
     def _judge_answers(self, now: float):
         if len(self.answered) < self.n or now < self.judged_from or \

@@ -1,0 +1,39 @@
+"""scripts/bench profile's accounting (eha_ros/bench/profile.py): each sampled stack is charged
+to the innermost frame that names a stage, and samples become microseconds per tick."""
+import pytest
+
+from eha_ros.bench import profile as P
+
+LOOP = 'Thread._bootstrap (threading.py:1002);PlantSide.realtime_loop ' \
+       '(eha_ros/nodes/plant_side.py:415);PlantSide.tick (eha_ros/nodes/plant_side.py:440)'
+RAW = '\n'.join([
+    # the estimator's kernel, called through the in-process delivery: the estimator
+    LOOP + ';LocalPublisher.publish (eha_ros/nodes/compose.py:93);Bus.guard.<locals>.guarded '
+    '(eha_ros/nodes/compose.py:58);EstimatorNode.on_state (eha_ros/nodes/estimator.py:94);'
+    'Estimator.update (eha_ros/core/estimator/estimator.py:310) 300',
+    # a message field set inside the plant side: message building
+    LOOP + ';PlantSide.publish_state (eha_ros/nodes/plant_side.py:522);ActuatorState.position '
+    '(eha_msgs/msg/_actuator_state.py:200) 100',
+    # the delivery itself (the lock): in-process delivery
+    LOOP + ';LocalPublisher.publish (eha_ros/nodes/compose.py:93);Bus.guard.<locals>.guarded '
+    '(eha_ros/nodes/compose.py:58) 50',
+    LOOP + ';EhaPlant.measure (eha_ros/core/plant/model.py:206) 40',
+    'spin (eha_ros/nodes/common.py:117);spin_once (rclpy/executors.py:800) 10',
+    'garbage',
+])
+
+
+def test_samples_are_charged_to_the_innermost_stage_and_scaled_per_tick():
+    b = P.breakdown(RAW, wall=0.5)          # 0.5 s at RATE: one sample = 2 us per tick
+    us = 1e6 / P.RATE / 0.5 / P.TICK_HZ
+    assert us == pytest.approx(2.0)
+    st = b['stages_us_per_tick']
+    assert st == pytest.approx({'estimator (core)': 300 * us,
+                                'message fields (generated classes)': 100 * us,
+                                'in-process delivery (nodes/compose.py)': 50 * us,
+                                'plant model: outputs (measure, truth)': 40 * us,
+                                'executor, timers (rclpy)': 10 * us})
+    assert b['sampled_us_per_tick'] == pytest.approx(500 * us)
+    assert sum(b['stage_share'].values()) == pytest.approx(1.0)
+    own = b['stage_top_frames_us_per_tick']['message fields (generated classes)']
+    assert list(own) == ['PlantSide.publish_state (eha_ros/nodes/plant_side.py:522)']
