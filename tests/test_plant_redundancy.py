@@ -58,3 +58,31 @@ def test_valves_ramp_over_opening_time_and_bypass_equalises():
     assert abs(tr.pressure_a - tr.pressure_b) < 0.5e5
     m = plant.measure()
     assert list(m.drive_enabled) == [False, False]
+
+
+def test_read_into_is_measure_as_the_hardware_reads_it():
+    """EhaPlant.read_into (the real-time loop's read, core.hardware.sim) gives what measure()
+    and truth() give, on the channel switch, an open bypass and a failed drive."""
+    from eha_ros.core.hardware.interface import Reading
+    plant = sc.make_plant({})
+    r, seen = Reading(), set()
+    for k in range(1200):
+        if k == 300:
+            plant.select(1, drive_enable=(False, True), valve_open=(False, True),
+                         bypass_open=True)
+        if k == 600:
+            plant.select(1, drive_enable=(False, True), valve_open=(False, True))
+            assert plant.inject_fault('motor_fail', 1, 1.0, 0.3)[0]
+        plant.step(200.0 * np.sin(k * 0.01), 5e3)
+        plant.read_into(r)
+        m, tr = plant.measure(), plant.truth()
+        assert (r.position, r.pressure_a, r.pressure_b) == (m.position, m.pressure_a,
+                                                            m.pressure_b)
+        assert r.motor_speed == list(m.motor_speed) and r.motor_current == list(m.motor_current)
+        assert r.valve_open == [bool(v > 0.5) for v in m.valve_open]
+        assert r.drive_enabled == list(m.drive_enabled) and r.drive_fault == list(m.drive_fault)
+        assert (r.active_channel, r.valid) == (m.active_channel, m.valid)
+        assert r.bypass_open == (tr.bypass_fraction > 0.5)
+        assert r.active_fault == m.drive_fault[m.active_channel]
+        seen.add((r.active_channel, r.bypass_open, r.active_fault, tuple(r.valve_open)))
+    assert len(seen) >= 4, seen           # the cases above were all met

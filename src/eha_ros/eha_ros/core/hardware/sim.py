@@ -47,25 +47,13 @@ class SimHardware(Hardware):
         self.plant.step(speed, self.load)
 
     def read(self, now: float) -> Reading:
-        m, tr, r = self.plant.measure(), self.plant.truth(), self.r
-        self._truth = tr
-        r.position = float(m.position)
-        r.pressure_a, r.pressure_b = float(m.pressure_a), float(m.pressure_b)
-        r.active_channel = int(m.active_channel)
-        r.bypass_open = float(tr.bypass_fraction) > 0.5
-        r.valid = bool(m.valid)
-        for i in (0, 1):
-            r.motor_speed[i] = float(m.motor_speed[i])
-            r.motor_current[i] = float(m.motor_current[i])
-            r.valve_open[i] = bool(m.valve_open[i] > 0.5)      # fractions -> open/closed
-            r.drive_enabled[i] = bool(m.drive_enabled[i])
-            r.drive_fault[i] = bool(m.drive_fault[i])
-        r.active_fault = r.drive_fault[r.active_channel]
-        return r
+        self.plant.read_into(self.r)
+        return self.r
 
     def truth(self):
-        """Ground truth of the last read (eha/sim/truth)."""
-        return self._truth
+        """Ground truth of the last read (eha/sim/truth): the plant steps only in write(), so
+        it is built now, when someone listens, not at every read."""
+        return self.plant.truth()
 
     def select(self, channel, drive_enable, valve_open, bypass_open) -> None:
         self.selection = (channel, tuple(drive_enable), tuple(valve_open), bypass_open)

@@ -211,6 +211,27 @@ class EhaPlant:
             drive_enabled=U[[L.U_EN0, L.U_EN1]] > 0.5,
             drive_fault=U[[L.U_FAIL0, L.U_FAIL1]] > 0.5, valid=self._valid)
 
+    def read_into(self, r) -> None:
+        """:meth:`measure` as the hardware interface reads it, written into ``r``
+        (core.hardware.interface.Reading) in place: the real-time loop's per-tick read without
+        a Measurement and its array copies (valves open above half open, as the bench's
+        switches report them; the bypass from the true fraction, which the plant side reads)."""
+        a = self.arrays
+        m, U, S = a.meas, a.U, a.S
+        r.position = float(m[L.M_X])
+        r.pressure_a, r.pressure_b = float(m[L.M_PA]), float(m[L.M_PB])
+        r.active_channel = active = int(a.aux[PS.A_ACTIVE])
+        r.bypass_open = float(S[L.S_FB]) > 0.5
+        r.valid = self._valid
+        for i, (w, c, en, fail) in enumerate(((L.M_W0, L.M_I0, L.U_EN0, L.U_FAIL0),
+                                              (L.M_W1, L.M_I1, L.U_EN1, L.U_FAIL1))):
+            r.motor_speed[i] = float(m[w])
+            r.motor_current[i] = float(m[c])
+            r.valve_open[i] = bool(S[L.S_CH + i * L.NCH + L.C_FV] > 0.5)
+            r.drive_enabled[i] = bool(U[en] > 0.5)
+            r.drive_fault[i] = bool(U[fail] > 0.5)
+        r.active_fault = r.drive_fault[active]
+
     def truth(self) -> Truth:
         a = self.arrays
         S = a.S
