@@ -140,10 +140,29 @@ def test_live_node_takes_its_parameters_with_live():
     assert '\n' not in str(err.value) and 'add --live' in str(err.value)
 
 
+# the stack's stated reaction when this machine cannot hold 1 kHz (core/loop/supervisor.py)
+MACHINE_STOP = 'loop supervisor: unanswered: the loop cannot hold real time'
+
+
+def bridge_attempts():
+    """Two tries of a --plant bridge run: on 2 cores ads_peer and eha_loop take about 1.1 of
+    them beside the tests, and CI has seen the supervisor stop a bridge run in its first
+    seconds (MACHINE_STOP, exit 1: the stack's stated reaction). A second such stop fails."""
+    for attempt in (1, 2):
+        yield attempt, attempt == 2
+
+
 def test_plant_swapped_for_the_bridge_and_the_ads_test_peer(tmp_path):
     """--plant bridge changes only the plant side: ads_peer (the simulated PLC) + the bridge in
     place of plant_sim; --activate: run_stack activates (arms) it after the controller."""
-    r, folder, summary = run_stack(tmp_path, '--plant', 'bridge', '--activate', '--duration', '6')
+    for attempt, last in bridge_attempts():
+        out = tmp_path / f'attempt{attempt}'
+        out.mkdir()
+        r, folder, summary = run_stack(out, '--plant', 'bridge', '--activate', '--duration', '6')
+        if r.returncode == 0 or last or not (summary or {}).get('stop_reason', '').startswith(
+                MACHINE_STOP):
+            break
+        print(f'attempt {attempt}: {summary["stop_reason"]}; once more')
     assert r.returncode == 0, r.stdout[-1500:] + r.stderr[-1500:]
     assert set(summary['exit_codes']) == {'ads_peer', 'eha_loop'}
     assert '--plant bridge' in summary['processes']['eha_loop']
@@ -353,25 +372,31 @@ def test_bridge_link_loss_fails_the_run(tmp_path):
     stall within 0.2 s (ERROR, safe state, the run stops, exit 1); the bridge's own link
     ERROR follows when its link-loss count is reached before the stop."""
     import time
-    st = Started(tmp_path, 'link', '--plant', 'bridge', '--activate', '--duration', '60')
-    peer, stopped = None, False
-    try:
-        assert st.running(), ''.join(st.lines)[-4000:]
-        # the peer's pid at once (the run may end by itself within the 2 s below on a loaded
-        # machine: a peer descheduled for 0.2 s is the same stall, seen by the same supervisor)
-        assert wait_for(lambda: _child(st, 'ads_peer'), 10), ''.join(st.lines)[-4000:]
-        peer = _child(st, 'ads_peer')
-        time.sleep(2.0)
-        if st.proc.poll() is None:
-            os.kill(peer, signal.SIGSTOP)
-            stopped = True
-        assert st.proc.wait(timeout=90) == 1, ''.join(st.lines)[-4000:]
-    finally:
-        if peer and _alive(peer):
-            os.kill(peer, signal.SIGCONT)
-        if st.proc.poll() is None:
-            st.proc.kill()
-    text = ''.join(st.lines)
+    for attempt, last in bridge_attempts():
+        st = Started(tmp_path, f'link{attempt}', '--plant', 'bridge', '--activate',
+                     '--duration', '60')
+        peer, stopped = None, False
+        try:
+            assert st.running(), ''.join(st.lines)[-4000:]
+            assert wait_for(lambda: _child(st, 'ads_peer'), 10), ''.join(st.lines)[-4000:]
+            peer = _child(st, 'ads_peer')
+            time.sleep(2.0)
+            try:
+                if st.proc.poll() is None:
+                    os.kill(peer, signal.SIGSTOP)
+                    stopped = True
+            except ProcessLookupError:       # the run ended meanwhile (below)
+                pass
+            assert st.proc.wait(timeout=90) == 1, ''.join(st.lines)[-4000:]
+        finally:
+            if peer and _alive(peer):
+                os.kill(peer, signal.SIGCONT)
+            if st.proc.poll() is None:
+                st.proc.kill()
+        text = ''.join(st.lines)
+        if stopped or last or f'stopped ({MACHINE_STOP}' not in text:
+            break
+        print(f'attempt {attempt}: stopped by the machine before the link loss; once more')
     print(f'peer stopped by the test: {stopped}')
     assert 'run_stack: FAILED: stopped (loop supervisor: stalled: plant side stalled' in text, \
         text[-4000:]

@@ -35,7 +35,7 @@ STAGES = (                      # (stage, pattern on 'function (file:line)'), in
     ('loop statistics (core/loop/stats.py)', r'\(eha_ros/core/loop/stats\.py'),
     ('loop supervisor (core/loop/supervisor.py)', r'\(eha_ros/core/loop/supervisor\.py'),
     ('plant model: step', r'EhaPlant\.step |\(eha_ros/core/plant/(integrator|stepper)'),
-    ('plant model: outputs (measure, truth)', r'EhaPlant\.(measure|truth|_channel) '),
+    ('plant model: outputs (measure, truth)', r'EhaPlant\.(measure|truth|_channel|read_into) '),
     ('plant model: other', r'\(eha_ros/core/plant/'),
     ('estimator (core)', r'\(eha_ros/core/estimator/'),
     ('controller (core)', r'\(eha_ros/core/(controller|qft)/'),

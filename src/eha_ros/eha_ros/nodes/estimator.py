@@ -154,9 +154,10 @@ class EstimatorNode:
                        'sensor_fault': NAMES[self.est.detector.code],
                        'position_variance_m2': self.est.kf.position_variance})
         values.update(self.c)
-        values.update({f'estimator_{k}': v for k, v in self.est.counters.items()})
+        # the loop thread adds keys: each dict taken in one step (diag.reader)
+        values.update({f'estimator_{k}': v for k, v in dict(self.est.counters).items()})
         values['estimator_updates'] = self.est.updates      # beside skipped/isolated_updates
-        for code, n in self.est.detector.detections.items():
+        for code, n in dict(self.est.detector.detections).items():
             values[f'detections_{NAMES[code]}'] = n
         if self.est.is_model and self.est.kf.i_leak is not None:
             values['leak_correction_m3_per_s_pa'] = self.est.kf.leak_correction

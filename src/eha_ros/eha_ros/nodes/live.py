@@ -248,7 +248,7 @@ class Live:
         if self.p['live.services']:
             self.discover_services()
 
-    @unlocked                    # hands a time to the server: reads one int
+    @diag.reader
     def broadcast_time(self):
         if self.latest_ns:
             self.server.broadcast_time(self.latest_ns)

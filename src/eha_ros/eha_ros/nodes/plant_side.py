@@ -133,7 +133,7 @@ class PlantSide(LifecycleNodeMixin):
             self, p[q + 'start_after'], self.state_topic.rsplit('/', 1)[0] + '/',
             p[q + 'start_timeout'],
             own=(self.pub_state,) + ((self.pub_truth,) if self.pub_truth else ()))
-        self.create_timer(p[q + 'diagnostics_period'], self.on_diagnostics_timer)
+        self.create_timer(p[q + 'diagnostics_period'], self.publish_diagnostics)
         self.create_timer(SUPERVISE_PERIOD, self.supervise)
         if self.want_configured:
             self.configure_now()
@@ -573,14 +573,10 @@ class PlantSide(LifecycleNodeMixin):
             elif not others:
                 self.conflict = ''
 
-    @unlocked                    # the graph query must not hold up a composed loop
-    def on_diagnostics_timer(self):
-        if self.program.exclusive:
-            self.check_conflict()
-        self.publish_diagnostics()
-
     @diag.reader
     def publish_diagnostics(self):
+        if self.program.exclusive:
+            self.check_conflict()
         now = self.now()
         g = self.gate
         per, ex = self.period.summary(), self.exec_time.summary()
