@@ -117,7 +117,8 @@ def profile(duration: float, log=print) -> dict:
                                  f'/proc/sys/kernel/yama/ptrace_scope 0)')
             if stack.dead():
                 raise RuntimeError(f'a process exited while sampled: {stack.dead()}')
-            raw = open(out).read()
+            with open(out) as fh:
+                raw = fh.read()
         finally:
             stack.stop(timeout=30)
             monitor.close()

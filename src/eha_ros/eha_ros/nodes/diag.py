@@ -10,11 +10,11 @@ def reader(method):
     runs it without the process-wide callback lock, so it never holds up the loop (tried:
     gathering under the lock, the bridge's loop tripped the supervisor's unanswered check 1.2 s
     after its start, just after the first readers ran, twice in one CI run). It runs beside
-    the loop thread, so it
-    takes the loop's containers in one C-level step -- ``dict(d)``, ``list(q)``, ``len``,
-    ``sum`` of numbers, ``dict.update`` -- before it iterates them in Python: a Python loop
-    over a dict or deque the loop thread changes raises 'changed size during iteration' (one
-    over the loop supervisor's saturation deque did, and ended eha_loop)."""
+    the loop thread, so it takes the loop's containers in one C-level step -- ``dict(d)``,
+    ``list(q)``, ``len``, ``sum`` of numbers, ``dict.update`` -- before it iterates them in
+    Python: a Python loop over a dict or deque the loop thread changes raises 'changed size
+    during iteration' (one over the loop supervisor's saturation deque did, and ended
+    eha_loop)."""
     return unlocked(method)
 
 

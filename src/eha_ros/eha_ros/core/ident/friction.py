@@ -91,16 +91,16 @@ def identify(rec, p, log=print) -> dict:
         c = x * nominal
         return curve(vk, c[0], c[1], c[2], c[3]) - fk
 
-    def fit_free(free: list, held: dict):
-        """Fit the multipliers of ``free``, the others at ``held`` (name -> multiplier)."""
-        idx = [FITTED.index(n) for n in free]
-        base = np.array([held.get(n, 1.0) for n in FITTED])
+    def multipliers(xf, free: list, held: dict) -> np.ndarray:
+        """All four multipliers: ``xf`` for ``free``, the others at ``held`` (name -> x)."""
+        x = np.array([held.get(n, 1.0) for n in FITTED])
+        x[[FITTED.index(n) for n in free]] = xf
+        return x
 
-        def sub(xf):
-            x = base.copy()
-            x[idx] = xf
-            return residual(x)
-        return least_squares_fit(sub, np.ones(len(free)), free, [1e-3] * len(free),
+    def fit_free(free: list, held: dict):
+        """Fit the multipliers of ``free``, the others at ``held``."""
+        return least_squares_fit(lambda xf: residual(multipliers(xf, free, held)),
+                                 np.ones(len(free)), free, [1e-3] * len(free),
                                  [50.0] * len(free), groups)
 
     free, held = list(FITTED), {}
@@ -124,9 +124,7 @@ def identify(rec, p, log=print) -> dict:
             getattr(p, n), None, None, getattr(p, n), False,
             f'not determined by the data: the fit drove it to its bound; held at nominal, '
             f'{", ".join(free)} fitted again')
-    x = np.array([held.get(n, 1.0) for n in FITTED])
-    x[[FITTED.index(n) for n in free]] = fit.x
-    c = x * nominal
+    c = multipliers(fit.x, free, held) * nominal
     log(f'identify: friction: F_c {c[0]:.0f} N, F_s {c[1]:.0f} N, v_s {c[2] * 1e3:.1f} mm/s, '
         f'mu {c[3]:.0f} N s/m ({len(vk)} samples up to {np.max(np.abs(vk)):.3f} m/s, force '
         f'residual {fit.residual_rms:.0f} N)')

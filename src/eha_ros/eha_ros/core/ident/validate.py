@@ -76,10 +76,10 @@ def validate(rec, identified: dict, config_dir: str | None, log=print) -> dict:
         f'{pos["nominal"] * 1e6:.0f} um nominal, {pos["identified"] * 1e6:.0f} um identified, '
         f'floor {pos["floor"] * 1e6:.0f} um; motor speed {spd["nominal"]:.1f} / '
         f'{spd["identified"]:.1f} rad/s, floor {spd["floor"]:.1f} rad/s')
-    for key, q in result.items():
-        for m, ok in (q['repeatable'].items() if isinstance(q, dict) else ()):
+    for key in QUANTITIES:
+        for m, ok in result[key]['repeatable'].items():
             if not ok:
-                v = q['runs'][m]
+                v = result[key]['runs'][m]
                 log(f'identify: validation: the {m} model\'s loop is not repeatable under the '
                     f'sensor noise ({key}: {min(v):.3g} to {max(v):.3g} over {n} draws): its '
                     f'figure and the floor say little (docs/identification.md, validation)')
