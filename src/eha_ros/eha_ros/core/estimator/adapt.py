@@ -49,7 +49,7 @@ import math
 from numba import njit
 
 from ..plant.friction import friction as stribeck
-from .kernels import mul, mulv
+from .kernels import mulv, propagate
 
 # consistency verdicts (Estimator.consistency)
 OK, MODEL, DISAGREE, SENSOR = 0, 1, 2, 3      # in rising precedence
@@ -201,8 +201,7 @@ def predict_jacobian(x, P, F, Fj, Dm, row0, col0, col1, n_lin, lam, eps, G, u, Q
     mulv(F, x, xn, None, False)
     mulv(G, u, xn, xn, False)
     x[:] = xn
-    mul(Fj, P, tmp, None, False, False, False)
-    mul(tmp, Fj, P, Q, False, True, True)
+    propagate(Fj, P, Q, tmp)
 
 
 @njit(cache=True)

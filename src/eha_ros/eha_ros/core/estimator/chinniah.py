@@ -48,7 +48,7 @@ class Chinniah3:
         self.R, self.Q = np.diag(R), np.diag(Q)
         self.P = np.diag(np.asarray(P0, float))
         self.x = np.zeros(3)
-        self._u, self._tmp = np.zeros(1), np.empty((3, 3))
+        self._u, self._tmp = np.zeros(1), kernels.scratch(3)
         self.y, self.S = np.zeros(2), np.zeros((2, 2))
 
     def step(self, z_pos: float, z_vel: float, dP: float, a1: float = 0.0, a2: float = 0.0):
@@ -80,7 +80,7 @@ class Chinniah4:
         self.R, self.Q = np.diag(R), np.diag(Q)
         self.P = np.diag(np.asarray(P0, float))
         self.x = np.zeros(4)
-        self._u, self._tmp = np.zeros(1), np.empty((4, 4))
+        self._u, self._tmp = np.zeros(1), kernels.scratch(4)
         self.y, self.S = np.zeros(2), np.zeros((2, 2))
 
     def step(self, z_pos: float, z_vel: float, dP: float, a3: float):
@@ -148,7 +148,7 @@ class ChinniahJoint:
         self.R, self.Q = np.diag(R), np.diag(Q)
         self.P = np.diag(np.asarray(P0, float))
         self.x = np.zeros(5)
-        self._u, self._tmp = np.zeros(1), np.empty((5, 5))
+        self._u, self._tmp = np.zeros(1), kernels.scratch(5)
         self.y, self.S = np.zeros(2), np.zeros((2, 2))
 
     def step(self, z_pos: float, z_vel: float, dP: float):

@@ -1,8 +1,11 @@
 """Compiled Kalman filter steps shared by the filters: predict (eq. 4.1-4.2) and a Joseph-form
-update (eq. 4.4-4.6) with innovation and NIS, for small dense matrices (n <= 8, m <= 3).
+update (eq. 4.4-4.6) with innovation and NIS, for small matrices (n <= 12, m <= 3).
 
-The arrays are updated in place by one small product helper (:func:`mul`, :func:`mulv`);
-with a workspace (:func:`update_ws`) a filter step allocates nothing but the m x m inverse.
+The arrays are updated in place by small product helpers (:func:`mul`, :func:`mulv`). The two
+n^3 products of each step, F P F' and (I - K H) P (I - K H)', go through :func:`sandwich`,
+which skips the exact zeros of F and of I - K H (the chamber filter's F has 29 non-zero
+entries of 144) and keeps the dense products' bits. With the scratch of :func:`scratch` and
+:func:`workspace_size` a filter step allocates nothing but the m x m inverse.
 filterpy's KalmanFilter computes the same (its update() is the Joseph form too) and is used as
 the reference in the tests.
 """
@@ -47,20 +50,80 @@ def mulv(A, v, out, c, sub):
         out[i] = s
 
 
+@njit(cache=True, inline='always')
+def pattern(S, idx, cnt):
+    """The columns of each row of S that are not exactly 0.0, ascending: idx[i, :cnt[i]]
+    (stored as floats in scratch; a NaN counts as non-zero)."""
+    for i in range(S.shape[0]):
+        c = 0
+        for k in range(S.shape[1]):
+            if S[i, k] != 0.0:
+                idx[i, c] = k
+                c += 1
+        cnt[i] = c
+
+
+def scratch(n: int) -> np.ndarray:
+    """:func:`predict`'s scratch for n states: T, U and S's pattern of :func:`sandwich`."""
+    return np.empty((3 * n + 1, n))
+
+
+@njit(cache=True, inline='always')
+def sandwich(S, P, C, T, W):
+    """P <- S P S' (+ C), P symmetric, over S's non-zero pattern; T n x n and W (2 n + 1) x n
+    scratch. T = S P, then P = T S' + C, each formed a row at a time from the entries of S that
+    are not zero (U = T' makes the second product row-wise too). Each entry is summed in the
+    index order of :func:`mul` and a skipped term is a signed zero, so the result is
+    :func:`mul`'s to the bit while the operands are finite (a NaN spreads less far)."""
+    n = P.shape[0]
+    U, idx, cnt = W[:n], W[n:2 * n], W[2 * n]
+    pattern(S, idx, cnt)
+    for i in range(n):                         # T = S P
+        for j in range(n):
+            T[i, j] = 0.0
+        for c in range(int(cnt[i])):
+            k = int(idx[i, c])
+            s = S[i, k]
+            for j in range(n):
+                T[i, j] += s * P[k, j]
+    for i in range(n):
+        for j in range(n):
+            U[j, i] = T[i, j]
+    for j in range(n):                         # P[i, j] = C[i, j] + sum_k T[i, k] S[j, k], i <= j
+        for i in range(j + 1):
+            P[j, i] = 0.0 if C is None else C[i, j]
+        for c in range(int(cnt[j])):
+            k = int(idx[j, c])
+            s = S[j, k]
+            for i in range(j + 1):
+                P[j, i] += U[k, i] * s
+        for i in range(j):
+            P[i, j] = P[j, i]
+
+
+@njit(cache=True, inline='always')
+def propagate(F, P, Q, tmp):
+    """P <- F P F' + Q (eq. 4.2) over F's non-zero pattern; ``tmp``: :func:`scratch` (or n x n,
+    the rest then allocated)."""
+    n = P.shape[0]
+    W = tmp[n:] if tmp.shape[0] > 3 * n else np.empty((2 * n + 1, n))
+    sandwich(F, P, Q, tmp[:n], W)
+
+
 @njit(cache=True)
 def predict(x, P, F, G, u, Q, tmp):
-    """x <- F x + G u (eq. 4.1); P <- F P F' + Q (eq. 4.2). ``tmp`` is n x n scratch."""
+    """x <- F x + G u (eq. 4.1); P <- F P F' + Q (eq. 4.2). ``tmp``: :func:`scratch`."""
     xn = tmp[0]                                # scratch row, free until F P below
     mulv(F, x, xn, None, False)
     mulv(G, u, xn, xn, False)
     x[:] = xn
-    mul(F, P, tmp, None, False, False, False)
-    mul(tmp, F, P, Q, False, True, True)
+    propagate(F, P, Q, tmp)
 
 
+@njit(cache=True)
 def workspace_size(n: int, m: int) -> int:
     """Scratch floats that :func:`update_ws` needs for n states and m measurements."""
-    return 3 * n * m + 2 * n * n + n
+    return 3 * n * m + 4 * n * n + 2 * n
 
 
 @njit(cache=True)
@@ -69,7 +132,7 @@ def update(x, P, H, R, z, y, S):
     S = H P H' + R; returns the NIS y' S^-1 y. x and P are updated in place."""
     n = x.shape[0]
     m = z.shape[0]
-    return update_ws(x, P, H, R, z, y, S, np.empty(3 * n * m + 2 * n * n + n))
+    return update_ws(x, P, H, R, z, y, S, np.empty(workspace_size(n, m)))
 
 
 @njit(cache=True)
@@ -140,9 +203,9 @@ def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_unexcited, i_moved, 
         for j in range(n):
             IKH[i, j] = 1.0 if i == j else 0.0
     mul(K, H, IKH, IKH, True, False, False)
-    mul(IKH, P, T, None, False, False, False)
     mul(K, R, KR, None, False, False, False)
-    mul(T, IKH, P, None, False, True, True)
+    W = ws[o + n:o + n + (2 * n + 1) * n].reshape((2 * n + 1, n))
+    sandwich(IKH, P, None, T, W)               # I - K H is I but in H's columns
     mul(KR, K, P, P, False, True, True)
     return nis
 
@@ -153,7 +216,7 @@ def warm_up():
     P = np.eye(3)
     F = np.eye(3)
     G = np.zeros((3, 1))
-    predict(x, P, F, G, np.zeros(1), np.eye(3), np.empty((3, 3)))
+    predict(x, P, F, G, np.zeros(1), np.eye(3), scratch(3))
     update(x, P, np.eye(1, 3), np.eye(1), np.zeros(1), np.zeros(1), np.zeros((1, 1)))
 
 

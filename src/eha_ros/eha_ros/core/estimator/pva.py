@@ -28,7 +28,7 @@ class PvaKF(kernels.StateView):
         self.R = np.array([[R]])
         self.P0 = np.diag(np.asarray(p0_diag, float))
         self._u = np.zeros(1)
-        self._tmp = np.empty((3, 3))
+        self._tmp = kernels.scratch(3)
         self.y, self.S = np.zeros(1), np.zeros((1, 1))
         self.reset()
 
