@@ -13,11 +13,12 @@ from eha_ros.core.estimator.chinniah import (ALPHA_TABLE_4_1, Chinniah3, Chinnia
                                              ChinniahJoint, simulate_rig)
 from eha_ros.core.estimator.chamber_kf import ChamberKF
 from eha_ros.core.estimator.chamber_kf import continuous as chamber_continuous
-from eha_ros.core.estimator.estimator import Estimator, build_filter, circuit
+from eha_ros.core.estimator.estimator import Estimator, build_filter
 from eha_ros.core.estimator.friction import friction_estimate
-from eha_ros.core.estimator.model_kf import HydroMech, continuous, zoh
+from eha_ros.core.estimator.model_kf import continuous, zoh
 from eha_ros.core.estimator.params import SCHEMA
 from eha_ros.core.estimator.pva import PvaKF, pva_matrices
+from eha_ros.core.plant.hydromech import circuit, hydromech
 from eha_ros.core.plant.linear import hydromech_abcd
 from eha_ros.core.plant.parameters import PlantParams
 
@@ -26,19 +27,18 @@ CONFIG = [os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 
 
 
-def hydro(params, leak_factor=2.0):
-    pp = PlantParams.from_dict(params)
-    return HydroMech(pp.A_p, pp.m_p, pp.b, pp.beta, pp.V_d, pp.C_eq, pp.D_p, leak_factor)
+def hydro(params, leakage='eq3_22'):
+    return hydromech(PlantParams.from_dict(params), leakage)
 
 
 # ---------------------------------------------------------------- model and discretisation
 def test_continuous_model_is_eq_4_35_corrected_as_in_plant_linear(params):
-    A, B = continuous(hydro(params, leak_factor=2.0))       # eq. 3.22 leakage: 2 C_eq beta/V_d
+    A, B = continuous(hydro(params, 'eq3_22'))              # eq. 3.22 leakage: 2 C_eq beta/V_d
     A_ref, B_ref, _, _ = hydromech_abcd(params)              # (4.35 prints C_eq beta/V_d)
-    assert np.allclose(A, A_ref, rtol=1e-12) and np.allclose(B, B_ref, rtol=1e-12)
+    assert np.array_equal(A, A_ref) and np.array_equal(B, B_ref)     # one derivation
     assert A[1, 2] > 0, 'row 2 must be +A_p/m_p p_D (printed sign makes a saddle)'
     assert np.all(np.linalg.eigvals(A)[np.abs(np.linalg.eigvals(A)) > 1e-9].real < 0)
-    A1, _ = continuous(hydro(params, 1.0))
+    A1, _ = continuous(hydro(params, 'eq4_35'))
     assert math.isclose(A[2, 2], 2 * A1[2, 2])               # the printed 4.35 term is half
 
 
@@ -375,7 +375,7 @@ def test_chamber_model_with_both_valves_shut_has_the_p_D_row_of_eq_3_22(params):
     terms cancel."""
     c = circuit(PlantParams.from_dict(params))
     A, B = chamber_continuous(c, False, False)
-    A3, B3 = continuous(hydro(params, leak_factor=2.0))
+    A3, B3 = continuous(hydro(params, 'eq3_22'))
     rng = np.random.default_rng(1)
     for _ in range(5):
         x, v, pa, pb = rng.normal(size=4) * (1e-3, 1e-2, 1e6, 1e6) + (0, 0, 1e6, 1e6)

@@ -10,106 +10,38 @@ with the load: a triangular position error at every reversal). Only during a loa
 are both chambers free. With both pressures measured, a linear model per valve state
 (check valve of A / of B open or shut) follows all three phases.
 
-Continuous model (states x [m], xdot [m/s], p_A, p_B [Pa gauge]; inputs omega [rad/s], F_L [N],
-1; s_A, s_B in {0, 1}: check valve open)::
-
-    x'    = xdot
-    xdot' = (A_p (p_A - p_B) - b xdot + F_L) / m_p
-    p_A'  = beta/V_d ( D_p omega - A_p xdot - C_x (p_A - p_B) - C_r (p_A - p_acc)
-                       + s_A K_c (p_c - p_A))
-    p_B'  = beta/V_d (-D_p omega + A_p xdot + C_x (p_A - p_B) - C_r (p_B - p_acc)
-                       + s_B K_c (p_c - p_B))
-
-C_x = C_p + C_c (cross-port and cross-piston leakage), C_r per-port leakage to the accumulator
-circuit (eq. 3.15), K_c the check-valve conductance, p_c = p_acc - crack - band/2 where its
-flow line crosses zero. The valve state is taken from the prior pressure estimate: open below
-p_c, where the linear flow is an inflow (a threshold at the cracking pressure would let the
-line's reverse flow between p_c and p_acc - crack hold a free chamber on its valve); the
-four (F, G) pairs are ZOH-discretised once. Optional states as in
-:class:`~.model_kf.ModelKF`: the sensor's Gauss-Markov offset b and an external force F_d;
-and the adaptive relative leakage, displacement and compliance corrections lambda, delta,
-kappa, an EKF with the leakage Jacobian, with the estimate projection of :mod:`.adapt`
-(issue 15: the loop must hold on every plant of Table 4.5).
+Continuous model: :func:`.hydromech.chamber` (eq. 3.20-3.21 with the check valves of Fig.
+3.12; states x [m], xdot [m/s], p_A, p_B [Pa gauge]; inputs omega [rad/s], F_L [N], 1; s_A, s_B
+in {0, 1}: check valve open, below its zero-flow pressure p_c). The valve state is taken from
+the prior pressure estimate: open below p_c, where the linear flow is an inflow (a threshold at
+the cracking pressure would let the line's reverse flow between p_c and p_acc - crack hold a
+free chamber on its valve); the four (F, G) pairs are ZOH-discretised once. Optional states
+as in :class:`~.model_kf.ModelKF`: the sensor's Gauss-Markov offset b and an external force
+F_d; and the adaptive relative leakage, displacement and compliance corrections lambda, delta,
+kappa, an EKF with the leakage Jacobian (:func:`.hydromech.leak_sensitivity`), with the
+estimate projection of :mod:`.adapt` (issue 15: the loop must hold on every plant of Table
+4.5).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
+from ..plant import hydromech as hm
+from ..plant.hydromech import Circuit, leak_sensitivity
 from . import adapt, kernels
 from .model_kf import MeasuredKF, zoh
 
 
-@dataclass(frozen=True)
-class Circuit:
-    """Constants of the chamber model (SI units, pressures gauge)."""
-
-    A_p: float
-    m_p: float
-    b: float
-    beta: float
-    V_d: float
-    C_x: float
-    C_r: float
-    D_p: float
-    K_c: float
-    p_acc: float
-    crack: float
-    band: float
-
-    @property
-    def p_c(self) -> float:
-        """Zero-flow pressure of the check valve's linear flow line."""
-        return self.p_acc - self.crack - 0.5 * self.band
-
-
 def continuous(c: Circuit, s_a: bool, s_b: bool, gm_corner_hz: float | None = None):
-    """(A, B) for check-valve states s_a, s_b; states [x, xdot, p_A, p_B (, b)], inputs
-    [omega, F_L, 1]."""
-    n = 4 if gm_corner_hz is None else 5
-    k = c.beta / c.V_d
-    A = np.zeros((n, n))
-    B = np.zeros((n, 3))
-    A[0, 1] = 1.0
-    A[1, 1] = -c.b / c.m_p
-    A[1, 2], A[1, 3] = c.A_p / c.m_p, -c.A_p / c.m_p
-    B[1, 1] = 1.0 / c.m_p
-    for i, sign, s in ((2, 1.0, s_a), (3, -1.0, s_b)):
-        j = 5 - i                                   # the other chamber
-        A[i, 1] = -sign * k * c.A_p
-        A[i, i] = -k * (c.C_x + c.C_r + (c.K_c if s else 0.0))
-        A[i, j] = k * c.C_x
-        B[i, 0] = sign * k * c.D_p
-        B[i, 2] = k * (c.C_r * c.p_acc + (c.K_c * c.p_c if s else 0.0))
+    """(A, B) of :func:`.hydromech.chamber` for check-valve states s_a, s_b; states
+    [x, xdot, p_A, p_B (, b)], inputs [omega, F_L, 1]: with ``gm_corner_hz`` the sensor's
+    Gauss-Markov offset b' = -2 pi f_c b."""
+    A, B = hm.chamber(c, s_a, s_b, 4 if gm_corner_hz is None else 5)
     if gm_corner_hz is not None:
         A[4, 4] = -2.0 * math.pi * gm_corner_hz
     return A, B
-
-
-def leak_sensitivity(c: Circuit, A: np.ndarray, Ts: float, n: int,
-                     paths: str = 'xr') -> np.ndarray:
-    """d expm((A + s A_L) Ts)/ds at s = 0 (n x n, zero outside the linear block): A_L the
-    leakage part of the chamber rows, of the cross-port path C_x ('x' in ``paths``) and of the
-    per-port path C_r to the accumulator ('r'), so lambda D is the first-order change of the
-    ZOH F when those leakages are (1 + lambda) times nominal (block-triangular expm, Van
-    Loan)."""
-    m = A.shape[0]
-    k = c.beta / c.V_d
-    cx = c.C_x if 'x' in paths else 0.0
-    cr = c.C_r if 'r' in paths else 0.0
-    AL = np.zeros((m, m))
-    for i in (2, 3):
-        AL[i, i] = -k * (cx + cr)
-        AL[i, 5 - i] = k * cx
-    M = np.zeros((2 * m, 2 * m))
-    M[:m, :m] = M[m:, m:] = A * Ts
-    M[:m, m:] = AL * Ts
-    out = np.zeros((n, n))
-    out[:m, :m] = expm(M)[:m, m:]
-    return out
 
 
 class ChamberKF(MeasuredKF):
@@ -209,10 +141,8 @@ class ChamberKF(MeasuredKF):
                 G[:n_lin] = Gl
                 if self.i_load is not None:
                     F[:n_lin, self.i_load] = Gl[:, 1]     # F_d held over Ts like F_L
-                Bq = np.zeros((n_lin, 2))
-                Bq[2, 0] = Bq[3, 1] = c.beta / c.V_d
                 Lq = np.zeros((n, 2))
-                Lq[:n_lin] = zoh(A, Bq, Ts)[1]
+                Lq[:n_lin] = zoh(A, hm.chamber_flow_columns(c, n_lin), Ts)[1]
                 if self.i_flow >= 0:                      # A_p v_f into A, out of B
                     F[:n_lin, self.i_flow] = c.A_p * (Lq[:n_lin, 0] - Lq[:n_lin, 1])
                 self.modes.append((F, G))

@@ -1,34 +1,22 @@
 """Model-based position Kalman filter of eq. 4.35, driven by the measured motor speed and the
 friction estimate of eq. 4.36, ZOH-discretised at Ts from the plant parameters.
 
-Continuous model (states x [m], xdot [m/s], p_D [Pa]; inputs omega [rad/s], F_L [N])::
+Continuous model: :func:`.hydromech.load_pressure` (eq. 4.35 with its corrections: row
+2's sign, F_L along +x, the p_D leakage factor k_L of estimator.model.pd_leakage, default eq.
+3.22's k_L = 2), states x [m], xdot [m/s], p_D [Pa], inputs omega [rad/s], F_L [N]. F and G are
+computed here with the matrix exponential of the augmented matrix (the printed discrete
+matrices 4.41/4.42 are not a ZOH of 4.35 with Table 3.8: negative diagonal).
 
-    x'    = xdot
-    xdot' = -b/m_p xdot + A_p/m_p p_D + F_L/m_p
-    p_D'  = -2 A_p beta/V_d xdot - k_L C_eq beta/V_d p_D + 2 D_p beta/V_d omega
-
-Corrections to the printed eq. 4.35 (stated here because they change the filter):
-
-- Row 2 is printed with -A_p/m_p p_D; that makes a saddle (an unstable model). The sign is +,
-  as in eq. 3.23/3.24: the load pressure pushes the piston towards +x.
-- F_L enters as +F_L/m_p: a force along +x. Eq. 4.36 gives it as the friction estimate
-  F_L = -sign(xdot) min(|p_D A_p|, F_s) (F_s = 800 N), i.e. a force opposing the motion. How it
-  is evaluated (choices, see :func:`.friction.friction_estimate`): sign(xdot) is taken from the
-  measured motor speed (the estimator passes its 50 Hz low-pass, model.friction_lowpass, so
-  speed-command chatter does not flip it), saturated over a small pump-flow band v_eps (the pump
-  drives the piston, xdot ~ D_p omega / A_p, eq. 3.22 at steady state), and p_D, if used, is the
-  measured load pressure (estimator.model.friction_pressure; otherwise |F_L| = F_s while
-  moving). Evaluating it from the filter's own xdot and p_D states, held over Ts, is an explicit
-  feedback A_p p_D[k-1] across the ~760 Hz hydraulic mode and made the discrete model chatter
-  (tried: the estimate's error was 3x the raw sensor's); a hard sign kicked the p_D state at
-  every reversal.
-- The p_D leakage coefficient k_L: eq. 3.22 derives 2 C_eq beta/V_d (k_L = 2), eq. 4.35
-  prints C_eq beta/V_d (k_L = 1). The nonlinear plant follows eq. 3.22 (checked with C_r = 0),
-  so k_L = 2 is the default (YAML estimator.model.pd_leakage: eq3_22 | eq4_35 | boost, the
-  last with C_p + C_c + C_r: the low chamber held at the accumulator pressure by its check
-  valve). A leakage-correction state (below) adapts the rest.
-- The printed discrete matrices 4.41/4.42 are not a ZOH of 4.35 with Table 3.8 (negative
-  diagonal); F and G are computed here with the matrix exponential of the augmented matrix.
+F_L is eq. 4.36's friction estimate F_L = -sign(xdot) min(|p_D A_p|, F_s) (F_s = 800 N), a
+force opposing the motion. How it is evaluated (choices, see
+:func:`.friction.friction_estimate`): sign(xdot) is taken from the measured motor speed (the
+estimator passes its 50 Hz low-pass, model.friction_lowpass, so speed-command chatter does not
+flip it), saturated over a small pump-flow band v_eps (the pump drives the piston, xdot ~ D_p
+omega / A_p, eq. 3.22 at steady state), and p_D, if used, is the measured load pressure
+(estimator.model.friction_pressure; otherwise |F_L| = F_s while moving). Evaluating it from the
+filter's own xdot and p_D states, held over Ts, is an explicit feedback A_p p_D[k-1] across the
+~760 Hz hydraulic mode and made the discrete model chatter (tried: the estimate's error was 3x
+the raw sensor's); a hard sign kicked the p_D state at every reversal.
 
 Optional states beyond eq. 4.35 (see :class:`ModelKF`): the position sensor's low-frequency
 Gauss-Markov component b (thesis Fig. 4.6, estimator.model.sensor_gm), b' = -2 pi f_c b + w,
@@ -39,43 +27,21 @@ instead of following the sensor's slow wander; and a leakage-coefficient correct
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import expm
 
+from ..plant.hydromech import HydroMech, load_pressure
 from . import kernels
 
 
-@dataclass(frozen=True)
-class HydroMech:
-    """The constants of eq. 4.35 (SI units)."""
-
-    A_p: float
-    m_p: float
-    b: float
-    beta: float
-    V_d: float
-    C_eq: float
-    D_p: float
-    leak_factor: float = 2.0
-
-
 def continuous(h: HydroMech, gm_corner_hz: float | None = None):
-    """(A, B) of eq. 4.35 (corrected, see module doc); states [x, xdot, p_D (, b)], inputs
-    [omega, F_L]."""
-    n = 3 if gm_corner_hz is None else 4
-    A = np.zeros((n, n))
-    A[0, 1] = 1.0
-    A[1, 1] = -h.b / h.m_p
-    A[1, 2] = h.A_p / h.m_p
-    A[2, 1] = -2.0 * h.A_p * h.beta / h.V_d
-    A[2, 2] = -h.leak_factor * h.C_eq * h.beta / h.V_d
+    """(A, B) of eq. 4.35 (corrected, :func:`.hydromech.load_pressure`); states
+    [x, xdot, p_D (, b)], inputs [omega, F_L]: with ``gm_corner_hz`` the sensor's Gauss-Markov
+    offset b' = -2 pi f_c b."""
+    A, B = load_pressure(h, 3 if gm_corner_hz is None else 4)
     if gm_corner_hz is not None:
         A[3, 3] = -2.0 * math.pi * gm_corner_hz
-    B = np.zeros((n, 2))
-    B[1, 1] = 1.0 / h.m_p
-    B[2, 0] = 2.0 * h.D_p * h.beta / h.V_d
     return A, B
 
 
@@ -118,7 +84,7 @@ class MeasuredKF(kernels.StateView):
         self.R = np.diag(np.asarray([R_pos] + [R_p] * len(rows), float))
         self.H1, self.R1 = self.H[:1].copy(), self.R[:1, :1].copy()
         self.Hp, self.Rp = self.H[1:].copy(), self.R[1:, 1:].copy()    # pressures only
-        self._tmp = np.empty((n, n))
+        self._tmp = kernels.scratch(n)
         self._ws = np.empty(kernels.workspace_size(n, 3))
         self.y = np.zeros(m)
         self.S = np.zeros((m, m))

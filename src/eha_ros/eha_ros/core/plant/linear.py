@@ -5,20 +5,17 @@ python-control StateSpace objects. Frequency responses are evaluated from the st
 (:func:`freqresp`) and transfer functions are given as zeros/poles/gain (:func:`zpk`); no
 high-order ss2tf numerators are formed.
 
-Corrections (DESIGN.md "Known inconsistencies", plant brief):
-- eq. 3.41 row 6 misprints "/L": d/dt(int i_e) = -i - (Kp_w/k_T) w + (Ki_w/k_T) int w_e
-  + (Kp_w/k_T) w_ref.
-- eq. 4.35 row 2 misprints the sign of A_p/m_p; +A_p/m_p is used as in eq. 3.24. In 4.35 the
-  F_L input enters as +F_L/m_p (a force along +x, eq. 4.36); in 3.41 (and the nonlinear
-  plant) F_L enters as -F_L/m_p (eq. 3.23/3.32).
-Linear constants: b = mu (1120 N s/m), C_eq = C_p + C_c + C_r/2, b_eq from appendix D.1.
-The p_D leakage term is 2 beta C_eq / V_d as eq. 3.22 derives (and the nonlinear plant
-follows); the matrices of eqs. 3.24 and 4.35 print beta C_eq / V_d, inconsistent with 3.22.
+The piston and load-pressure rows (eq. 3.22-3.23, with eq. 3.22's leakage 2 beta C_eq/V_d,
+which the matrices of eq. 3.24 and 4.35 print as beta C_eq/V_d) and the corrections of eq. 4.35
+come from :mod:`.hydromech`. Here too: eq. 3.41 row 6 misprints "/L": d/dt(int i_e) = -i -
+(Kp_w/k_T) w + (Ki_w/k_T) int w_e + (Kp_w/k_T) w_ref. Linear constants: b = mu (1120 N s/m),
+C_eq = C_p + C_c + C_r/2, b_eq from appendix D.1.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from . import hydromech as hm
 from .parameters import PlantParams
 
 
@@ -26,16 +23,19 @@ def _p(params) -> PlantParams:
     return params if isinstance(params, PlantParams) else PlantParams.from_dict(params)
 
 
-def _mech_hydro_rows(p: PlantParams, A: np.ndarray, i_w=1, i_x=2, i_v=3, i_p=4):
-    """Fill the shaft (w), piston (x, xdot) and load pressure (p_D) rows (eq. 3.17, 3.22-3.23)."""
+def _mech_hydro_rows(p: PlantParams, A: np.ndarray, B: np.ndarray | None = None, i_w=1,
+                     i_x=2, i_v=3, i_p=4, i_load=1):
+    """Fill the shaft (w, eq. 3.17), piston (x, xdot) and load pressure (p_D) rows (eq.
+    3.22-3.23, :func:`.hydromech.load_pressure` with w a state); with ``B``, its column
+    ``i_load`` takes F_L towards -x (eq. 3.23)."""
     A[i_w, i_w] = -p.b_eq / p.J_eq
     A[i_w, i_p] = -p.D_p / p.J_eq
-    A[i_x, i_v] = 1.0
-    A[i_v, i_v] = -p.b / p.m_p
-    A[i_v, i_p] = p.A_p / p.m_p
-    A[i_p, i_w] = 2 * p.beta * p.D_p / p.V_d
-    A[i_p, i_v] = -2 * p.beta * p.A_p / p.V_d
-    A[i_p, i_p] = -2 * p.beta * p.C_eq / p.V_d       # eq. 3.22 (3.24 prints beta C_eq/V_d)
+    A3, B3 = hm.load_pressure(hm.hydromech(p))
+    rows = [i_x, i_v, i_p]
+    A[np.ix_(rows, rows)] = A3
+    A[rows, i_w] = B3[:, 0]
+    if B is not None:
+        B[i_v, i_load] = -B3[1, 1]
 
 
 def voltage_abcd(params, with_load: bool = False):
@@ -45,11 +45,9 @@ def voltage_abcd(params, with_load: bool = False):
     A[0, 0] = -p.R / p.L
     A[0, 1] = -p.k_E / p.L
     A[1, 0] = p.k_T / p.J_eq
-    _mech_hydro_rows(p, A)
     B = np.zeros((5, 2 if with_load else 1))
+    _mech_hydro_rows(p, A, B if with_load else None)
     B[0, 0] = 1.0 / p.L
-    if with_load:
-        B[3, 1] = -1.0 / p.m_p
     C = np.zeros((1, 5))
     C[0, 2] = 1.0
     return A, B, C, np.zeros((1, B.shape[1]))
@@ -86,11 +84,10 @@ def velocity_abcd(params, lowpass: bool = False):
     A[0, 1] = -p.k_E / p.L
     A[0, 5] = p.Ki_i / p.L
     A[1, 0] = p.k_T / p.J_eq
-    _mech_hydro_rows(p, A)
+    _mech_hydro_rows(p, A, B)
     A[5, 0] = -1.0
     A[6, 1] = -1.0
     B[6, 0] = 1.0
-    B[3, 1] = -1.0 / p.m_p
     if lowpass:
         # i_f' = K3 (kpw (w_ref - w) + kiw int w_e - i_f); current PI acts on i_f - i
         k3 = p.lowpass_w
@@ -121,14 +118,10 @@ def velocity_loop_abcd(params, lowpass: bool = False):
 
 
 def hydromech_abcd(params):
-    """Eq. 4.35 (row 2 sign corrected): states [x, xdot, p_D], inputs [w, F_L] with F_L along
-    +x (as the friction estimate of eq. 4.36), output x."""
-    p = _p(params)
-    A = np.array([
-        [0.0, 1.0, 0.0],
-        [0.0, -p.b / p.m_p, p.A_p / p.m_p],
-        [0.0, -2 * p.A_p * p.beta / p.V_d, -2 * p.C_eq * p.beta / p.V_d]])   # eq. 3.22
-    B = np.array([[0.0, 0.0], [0.0, 1.0 / p.m_p], [2 * p.D_p * p.beta / p.V_d, 0.0]])
+    """Eq. 4.35 (corrected, :func:`.hydromech.load_pressure` with eq. 3.22's leakage): states
+    [x, xdot, p_D], inputs [w, F_L] with F_L along +x (as the friction estimate of eq. 4.36),
+    output x."""
+    A, B = hm.load_pressure(hm.hydromech(_p(params)))
     C = np.array([[1.0, 0.0, 0.0]])
     return A, B, C, np.zeros((1, 2))
 
