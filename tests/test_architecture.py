@@ -1,5 +1,14 @@
 """The package's shape (docs/design.md "Layout"): no import cycle, no rclpy under core/, one
-node registry that setup, the stack and the tools agree with."""
+node registry that setup, the stack and the tools agree with, one topic table.
+
+Layers of core/, lowest first (a folder imports only folders before it; core/*.py modules --
+stats, topics, jit_cache, kernel_records -- are below every folder and import none):
+config, plant, io, bridge, hardware, redundancy, controller, qft, estimator, loop, sweep, sim,
+ident. bridge is the ADS transport the hardware backend uses; the plant-side nodes' schemas
+(hardware/sim_params.py, hardware/bridge_params.py) sit beside the hardware side; controller.lti
+(transfer functions) is below the QFT design; the random family's box (qft.family_box) below
+the estimator's tuning; loop (safe state, supervisor) composes estimator and redundancy; a sweep's
+figures and plots (sweep.analysis, sweep.plots) are below the batch scenarios that use them."""
 import ast
 import os
 
@@ -143,3 +152,85 @@ def test_installed_executables_are_the_registry():
     missing = [n.executable for n in registry.NODES.values()
                if not os.path.exists(os.path.join(bindir, n.executable))]
     assert missing == []
+
+
+# ------------------------------------------------------------------- folders of core/
+def _core_folder_graph(modules: dict) -> dict:
+    """core folder (or top-level core module) -> the core folders/modules it imports."""
+    graph = {}
+    for m, p in modules.items():
+        parts = m.split('.')
+        if parts[:2] != ['eha_ros', 'core'] or len(parts) < 3:
+            continue
+        src = parts[2]
+        graph.setdefault(src, set())
+        for t in _imports(m, p, modules):
+            q = t.split('.')
+            if q[:2] == ['eha_ros', 'core'] and len(q) > 2 and q[2] != src:
+                graph[src].add(q[2])
+    return graph
+
+
+def _folder_cycles(graph: dict) -> list:
+    """Import cycles between folders: strongly connected components (pairs included)."""
+    return _cycles({k: set(v) & set(graph) for k, v in graph.items()})
+
+
+def test_folder_cycle_finder_finds_a_planted_cycle():
+    modules = _modules()
+    graph = _core_folder_graph(modules)
+    assert graph['sim'] >= {'plant', 'estimator', 'controller'}, graph['sim']
+    planted = {k: set(v) for k, v in graph.items()}
+    planted['plant'].add('sim')                       # plant -> sim -> plant
+    assert any({'plant', 'sim'} <= set(c) for c in _folder_cycles(planted))
+    assert _folder_cycles({'a': {'b'}, 'b': {'a'}, 'c': set()}) == [['a', 'b']]
+
+
+def test_no_two_core_folders_import_each_other():
+    graph = _core_folder_graph(_modules())
+    cycles = _folder_cycles(graph)
+    print({k: sorted(v) for k, v in sorted(graph.items())})
+    assert cycles == []
+
+
+# --------------------------------------------------------------------- one topic table
+def _topic_literals(path: str, names: set) -> list:
+    """(line, text) of string constants (not docstrings) that name a topic of ``names``."""
+    tree = ast.parse(open(path, encoding='utf-8').read())
+    docs = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                docs.add(id(body[0].value))
+    return [(n.lineno, n.value) for n in ast.walk(tree)
+            if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docs
+            and n.value.lstrip('/') in names]
+
+
+def _topic_offenders() -> dict:
+    from eha_ros.core import topics
+    names = {t.name for t in topics.TOPICS + topics.SERVICES}
+    table = os.path.join(BASE, 'core', 'topics.py')
+    out = {}
+    for path in _modules().values():
+        if path != table:
+            found = _topic_literals(path, names)
+            if found:
+                out[os.path.relpath(path, BASE)] = found
+    return out
+
+
+def test_topic_finder_finds_a_planted_literal(tmp_path):
+    f = tmp_path / 'x.py'
+    f.write_text('"""eha/state in a docstring is fine."""\nA = "/eha/state"\nB = "eha/statex"\n'
+                 'def f():\n    """eha/command"""\n    return "eha/command"\n')
+    assert _topic_literals(str(f), {'eha/state', 'eha/command'}) == \
+        [(2, '/eha/state'), (6, 'eha/command')]
+
+
+def test_topic_names_come_from_the_table():
+    """Only core/topics.py spells a topic's or a service's name (with or without the leading
+    slash)."""
+    offenders = _topic_offenders()
+    assert offenders == {}, f'{len(offenders)} files spell a topic name: {offenders}'

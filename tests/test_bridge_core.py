@@ -13,7 +13,7 @@ from eha_ros.core.hardware.gate import CommandGate
 from eha_ros.core.hardware.staleness import Staleness
 from eha_ros.core.bridge.symbols import ROLES, load_symbol_map
 from eha_ros.core.config.params import ParamError, default_config_dir
-from eha_ros.core.plant.node_params import SCHEMA as SIM
+from eha_ros.core.hardware.sim_params import SCHEMA as SIM
 from ros_util import free_port
 
 MAP = f'{default_config_dir()}/ads_symbols.yaml'

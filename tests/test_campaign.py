@@ -18,6 +18,7 @@ from eha_ros.core.config.cli import UsageError
 from eha_ros.core.sim import campaign as C
 from eha_ros.core.sim import family as F
 from eha_ros.core.sim import scenarios as SC
+from eha_ros.core.sweep.analysis import load_step_figures
 from test_bridge_core import free_port
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -279,7 +280,7 @@ def test_load_step_steady_error_is_against_the_sensor_without_its_white_noise():
     x = np.full(1000, 3e-6)
     gm = np.where(t >= 0.5, 25e-6, -40e-6)
     sig = dict(t=t, truth=x, sensor_lf=x + gm, estimate=np.zeros(1000))
-    f = SC.load_step_figures(sig, dict(t_step=0.1, steady=[0.5, 0.8]), 1e-3)
+    f = load_step_figures(sig, dict(t_step=0.1, steady=[0.5, 0.8]), 1e-3)
     assert f['steady_error_m'] == pytest.approx(28e-6)
     assert f['steady_error_truth_m'] == pytest.approx(3e-6)
 

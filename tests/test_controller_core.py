@@ -202,7 +202,7 @@ def test_bumpless_restart_and_hold():
 
 def test_jumped_reference_moves_with_bounded_acceleration_and_sines_pass_unchanged():
     from eha_ros.core.controller.reference import ReferenceShaper
-    from eha_ros.core.loop.stats import Counters
+    from eha_ros.core.stats import Counters
     sh = ReferenceShaper(0.12, 0.005, 0.19, TS, Counters(), accel_limit=10.0)
     sh.start_from(0.0)
     sh.request(0.005)

@@ -18,7 +18,7 @@ from eha_ros.core.estimator import adapt, tuning
 from eha_ros.core.estimator import fault_detector as fd
 from eha_ros.core.estimator.chamber_kf import ChamberKF, continuous, leak_sensitivity
 from eha_ros.core.estimator.estimator import Estimator
-from eha_ros.core.plant.node_params import SCHEMA as SIM
+from eha_ros.core.hardware.sim_params import SCHEMA as SIM
 from eha_ros.core.qft.family import scaled_params
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

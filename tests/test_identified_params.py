@@ -11,7 +11,7 @@ import pytest
 from eha_ros.core.config.cli import UsageError
 from eha_ros.core.config.params import ParamError, load, override_arg, parse_ros_args
 from eha_ros.core.config.registry import schema_for
-from eha_ros.core.plant.node_params import plant_file
+from eha_ros.core.hardware.sim_params import plant_file
 from eha_ros.core.sim import campaign as C
 from eha_ros.core.sim import scenarios as SC
 from eha_ros.tools import design_qft, run_stack

@@ -36,9 +36,10 @@ def config_copy(tmp_path, experiment=None, bridge=None):
                                     ('hardware_bridge.yaml', 'hardware_bridge', 'ads', bridge)):
         if over:
             doc = yaml.safe_load((cfg / name).read_text())
-            part = doc[node]['ros__parameters'][group]
+            params = doc[node]['ros__parameters'] = doc[node]['ros__parameters'] or {}
+            part = params.setdefault(group, {})
             for k, v in over.items():
-                part[k].update(v) if isinstance(v, dict) else part.__setitem__(k, v)
+                part.setdefault(k, {}).update(v) if isinstance(v, dict) else part.__setitem__(k, v)
             (cfg / name).write_text(yaml.safe_dump(doc))
     return cfg
 

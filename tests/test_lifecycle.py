@@ -14,7 +14,7 @@ import pytest
 from eha_ros.core.sim.batch import node_params
 from eha_ros.core.bridge.peer import AdsPeer
 from eha_ros.core.bridge.symbols import load_symbol_map
-from eha_ros.core.plant.node_params import SCHEMA as SIM
+from eha_ros.core.hardware.sim_params import SCHEMA as SIM
 import probes
 from ros_util import ROOT, start_process, stop_process, wait_for, wait_matched
 from test_bridge_core import MAP, free_port

@@ -15,7 +15,8 @@ def test_yaml_has_every_parameter_with_a_comment_and_loads():
     with open(YAML) as fh:
         text = fh.read()
     keys = set(flatten(yaml.safe_load(text)['/**']['ros__parameters']))
-    assert keys == set(PLANT_SCHEMA.by_name)
+    # the file lists what differs from the schema defaults (tests/test_config_home.py)
+    assert keys <= set(PLANT_SCHEMA.by_name)
     values = load(PLANT_SCHEMA, [YAML])
     assert values['plant.pump.D_p'] == pytest.approx(6.684e-7)
     for line in text.splitlines():

@@ -7,7 +7,8 @@ from eha_ros.core.plant import linear
 from eha_ros.core.plant.parameters import PLANT_SCHEMA
 from eha_ros.core.qft import bounds as qb
 from eha_ros.core.config.params import ParamError
-from eha_ros.core.qft import cost, family, freqresp, lti, minimax, prefilter, pso, verify
+from eha_ros.core.controller import lti
+from eha_ros.core.qft import cost, family, freqresp, minimax, prefilter, pso, verify
 from eha_ros.core.qft.spec import QftSpec, default_spec, load_spec
 
 

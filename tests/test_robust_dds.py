@@ -12,6 +12,7 @@ from eha_ros.core.sim import campaign as C
 from eha_ros.core.sim import family as F
 from eha_ros.core.sim import linear
 from eha_ros.core.sim import scenarios as SC
+from eha_ros.core.sweep.analysis import load_step_figures
 from eha_ros.stack import Stack
 from ros_util import STEP_STEADY_LIMIT, wait_for, wait_matched
 
@@ -38,7 +39,7 @@ LOAD_PEAK_FACTOR = {'leaky': 1.35, 'tight': 1.25}
 # controller residual + the estimator's share of the batch test (10 um) + the 1 s mean of the
 # sensor's Gauss-Markov offset over DDS's own noise at 3 sigma (31.5 um; at 2 sigma, 21 um,
 # the limit failed about one run in 40 by its own construction).
-# Since issue 42 the figure (scenarios.load_step_figures' steady_error_m) is of truth + the
+# Since issue 42 the figure (sweep.analysis.load_step_figures' steady_error_m) is of truth + the
 # sensor's Gauss-Markov offset (PlantTruth.position_sensor_offset); the limits were set for the
 # truth alone and are kept (the truth's own error is printed beside).
 LOAD_STEADY_LIMIT = {'leaky': 20.2e-6 + 10e-6 + 31.5e-6, 'tight': 20e-6}
@@ -116,7 +117,7 @@ def test_corner_step_and_load_step_in_real_time(corner, ros_node):
               f'reference went out, steady error {steady * 1e6:.1f} um (issue 42: 20 um, '
               f'{"met" if steady <= 20e-6 else "not met"})')
         assert over <= 5.0 and settle <= 0.3 and steady <= STEP_STEADY_LIMIT
-        # back to 0, then 5 kN load step while holding (scenarios.load_step_figures)
+        # back to 0, then 5 kN load step while holding (sweep.analysis.load_step_figures)
         load = SC.load('load_step').params
         b.ref.publish(b.Ref(position=0.0))
         b.wait_ticks(1500)
@@ -124,7 +125,7 @@ def test_corner_step_and_load_step_in_real_time(corner, ros_node):
         b.load.publish(b.Load(force=load['force']))
         b.wait_ticks(int(load['steady'][1] / TS) + 100)
         sig, t_step = b.signals(k_load - 300, b.seq, k_load)
-        f = SC.load_step_figures(sig, dict(load, t_step=t_step), TS)
+        f = load_step_figures(sig, dict(load, t_step=t_step), TS)
         peak, steady = f['peak_deviation_m'], f['steady_error_m']
         print(f'{corner} load step: peak {peak * 1e3:.3f} mm (linear loop {lin * 1e3:.3f} mm), '
               f'steady {steady * 1e6:.1f} um (truth + sensor offset; the truth '

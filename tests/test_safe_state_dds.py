@@ -108,7 +108,7 @@ def test_stuck_sensor_leads_to_zero_speed_and_hydraulic_lock(ros_node, tmp_path)
     # select when it arrives (not tick-locked, unlike commands): the lock's tick over DDS
     # depends on the machine (the batch campaigns give its time: 29 ms after a stuck sensor)
     from eha_ros.core.sim.batch import node_params
-    from eha_ros.core.plant.node_params import SCHEMA
+    from eha_ros.core.hardware.sim_params import SCHEMA
     p = node_params('plant_sim', SCHEMA)
     A_p = p['plant.cylinder.A_p']
     creep = p['plant.cylinder.C_c'] * (5e3 / A_p) / A_p

@@ -5,15 +5,15 @@ import numpy as np
 import pytest
 
 from eha_ros.core.qft import family as qf
-from eha_ros.core.qft import lti
-from eha_ros.core.qft.spec import default_spec
+from eha_ros.core.controller import lti
+from eha_ros.core.qft.spec import configured_spec, default_spec
 from eha_ros.core.sim import linear
 
 
 @pytest.fixture(scope='module')
 def grid():
     """The 270 plants of Table 4.5 (config/qft_spec.yaml) and the predictions for them."""
-    spec = linear.default_spec()
+    spec = configured_spec()
     scales = qf.grid_scales(spec)
     plant, ctl = linear.default_plant(), linear.default_controller()
     t0 = time.perf_counter()
@@ -51,7 +51,7 @@ def test_stiffness_matches_qft_report(grid):
     assert k7.min() >= 49.0
     # with the QFT design's G_v (nominal 1/k_T on every plant) the figure is the design tool's
     Gv, G, _ = linear.controllers(plant, ctl)
-    spec = linear.default_spec()
+    spec = configured_spec()
     fam = qf.build_family(plant, spec)
     casc = qf.velocity_loop_plants(fam, Gv, spec.loop_delay(fam.drive_delay))
     w = np.logspace(-2, np.log10(2 * np.pi * 7), 200)
@@ -132,7 +132,7 @@ def test_delay_costs_stiffness(grid):
     without it the leakiest plant is stiffer at 7 Hz (a little, with this G)."""
     _, plant, ctl, _, _ = grid
     from eha_ros.core.qft.spec import QftSpec
-    spec = linear.default_spec()
+    spec = configured_spec()
     assert linear.loop_delay(plant, spec) == pytest.approx(2.5e-3)
     s = np.array([[10.0, 1, 1, 1, 1]])
     kw = dict(freqs_hz=(), stiff_freqs_hz=(7,), plant=plant, controller=ctl, load_step=False)

@@ -199,7 +199,7 @@ def test_load_step_session_reports_the_campaign_figures(tmp_path, capsys):
     # Gauss-Markov offset) near the reference, so the truth carries minus the offset; the
     # load deflects it by a decaying bump. The plant's truth of tick k reports the load
     # applied during tick k-1 -> k: the session puts the step one tick before that truth
-    from eha_ros.core.sim.scenarios import KINDS, load_step_figures
+    from eha_ros.core.sweep.analysis import LOAD_STEP, load_step_figures
     s = load_step_session(tmp_path, offset=2e-3)
     n, Ts, seq0 = s.n, s.Ts, 1000
     t = np.arange(n) * Ts
@@ -219,7 +219,7 @@ def test_load_step_session_reports_the_campaign_figures(tmp_path, capsys):
         s.record('estimate', seq0 + k, estimate[k])
         s.record('load', seq0 + k, loads[k - 1] if k else 0.0)
     summary = s.finish()
-    p = KINDS['load_step']
+    p = LOAD_STEP
     want = load_step_figures({'t': t, 'truth': truth - 2e-3, 'sensor_lf': truth + off - 2e-3,
                               'estimate': estimate - 2e-3}, p, Ts)
     assert summary['complete'] and summary['status'] == 'complete'

@@ -10,9 +10,10 @@ import time
 
 from .core.config.cli import UsageError
 from .stack import cpu_seconds
+from .core import topics as T
 
 ERROR = 2                       # diagnostic_msgs/DiagnosticStatus ERROR (3: STALE)
-PLANT_TOPIC = '/eha/state'      # published by exactly one plant side per stack
+PLANT_TOPIC = T.STATE.path      # published by exactly one plant side per stack
 DISCOVERY_WAIT = 2.0            # [s] to see the publishers already on the domain
 
 

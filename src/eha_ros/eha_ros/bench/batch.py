@@ -49,7 +49,7 @@ def build(scn):
     from ..core.sim.batch import BatchLoop, node_params
     from ..core.sim import switchover as B
     from ..core.plant import EhaPlant
-    from ..core.plant.node_params import SCHEMA as PLANT_SIM
+    from ..core.hardware.sim_params import SCHEMA as PLANT_SIM
     plant = EhaPlant(node_params('plant_sim', PLANT_SIM), seed=scn.seed)
     Ts = plant.Ts
     ctl, hold = B.make_controller(Ts)

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..core.config.params import default_config_dir, load
 from ..core.estimator.params import SCHEMA
+from ..core import topics as T
 
 
 def _stats(prefix: str, samples) -> dict:
@@ -134,8 +135,8 @@ def dds_latency(duration: float = 10.0) -> dict:
                 est_t[msg.seq] = time.monotonic_ns()
 
         qos = stream_qos()
-        node.create_subscription(ActuatorState, '/eha/state', on_state, qos)
-        node.create_subscription(PositionEstimate, '/eha/estimate', on_est, qos)
+        node.create_subscription(ActuatorState, T.STATE.path, on_state, qos)
+        node.create_subscription(PositionEstimate, T.ESTIMATE.path, on_est, qos)
         ex = SingleThreadedExecutor()
         ex.add_node(node)
         stop = threading.Event()

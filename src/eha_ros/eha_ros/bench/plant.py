@@ -12,6 +12,7 @@ import math
 import time
 
 from . import arg as _arg
+from ..core import topics as T
 
 
 def run(args=None) -> dict:
@@ -93,7 +94,7 @@ def node_realtime(duration: float = 10.0) -> dict:
     rclpy.init()
     node = rclpy.create_node('bench_plant')
     stamps, seqs, diags = [], [], []
-    cmd_pub = node.create_publisher(ActuatorCommand, 'eha/command', 10)
+    cmd_pub = node.create_publisher(ActuatorCommand, T.COMMAND.name, 10)
     cmd = ActuatorCommand()
 
     def on_state(msg):
@@ -108,7 +109,7 @@ def node_realtime(duration: float = 10.0) -> dict:
             if st.name.startswith('plant_sim'):
                 diags.append({kv.key: kv.value for kv in st.values})
 
-    node.create_subscription(ActuatorState, 'eha/state', on_state, 100)
+    node.create_subscription(ActuatorState, T.STATE.name, on_state, 100)
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     try:
         t_end = time.monotonic() + 60

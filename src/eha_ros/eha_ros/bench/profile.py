@@ -32,7 +32,7 @@ STAGES = (                      # (stage, pattern on 'function (file:line)'), in
     ('message fields (generated classes)', r'/msg/_[a-z_]+\.py'),
     ('in-process delivery (nodes/compose.py)', r'\(eha_ros/nodes/compose\.py'),
     ('diagnostics', r'\(eha_ros/nodes/diag\.py|publish_diagnostics|diagnostic_msgs'),
-    ('loop statistics (core/loop/stats.py)', r'\(eha_ros/core/loop/stats\.py'),
+    ('loop statistics (core/stats.py)', r'\(eha_ros/core/stats\.py'),
     ('loop supervisor (core/loop/supervisor.py)', r'\(eha_ros/core/loop/supervisor\.py'),
     ('plant model: step', r'EhaPlant\.step |\(eha_ros/core/plant/(integrator|stepper)'),
     ('plant model: outputs (measure, truth)', r'EhaPlant\.(measure|truth|_channel|read_into) '),

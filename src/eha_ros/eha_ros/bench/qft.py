@@ -11,7 +11,8 @@ def run(args=None) -> dict:
     from ..core.config.params import load
     from ..core.plant.parameters import PLANT_SCHEMA
     from ..core.qft import bounds as qb
-    from ..core.qft import family, lti
+    from ..core.controller import lti
+    from ..core.qft import family
     from ..core.qft.spec import default_spec
     from ..core.config.params import default_config_dir
     import os

@@ -10,6 +10,7 @@ import time
 
 from ..core.io import recording
 from ..stack import Stack, cpu_seconds
+from ..core import topics as T
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 WARMUP_S = 10.0
@@ -39,10 +40,10 @@ def measure(mode: str, duration: float) -> dict:
     wall = (t1 - t0) * 1e-9
     in_window = {t: sum(t0 <= r.log_time < t1 for r in rs) for t, rs in recs.items()}
     n = sum(in_window.values())
-    ticks = in_window.get('/eha/state', 0)
-    states = summ.get('/eha/state', {}).get('count', 0)
+    ticks = in_window.get(T.STATE.path, 0)
+    states = summ.get(T.STATE.path, {}).get('count', 0)
     cpu = c1['recorder'] - c0['recorder']
-    seqs = {r.msg.seq for r in recs.get('/eha/state', [])}
+    seqs = {r.msg.seq for r in recs.get(T.STATE.path, [])}
     gaps = (max(seqs) - min(seqs) + 1 - len(seqs)) if seqs else None
     out = {'window_s': wall, 'recorder_cpu_fraction': cpu / wall,
            'messages_per_s': n / wall, 'state_rate_hz': ticks / wall,

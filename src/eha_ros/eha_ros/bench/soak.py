@@ -15,6 +15,7 @@ import tempfile
 import time
 
 from .stack import NODES, wait_running
+from ..core import topics as T
 
 PROGRESS_S = 60.0
 
@@ -49,7 +50,7 @@ def _recording_figures(path: str, wall: float) -> dict:
     from ..core.io import recording
     summ = recording.summary(path)
     size = os.path.getsize(path)
-    states, gaps = recording.seq_coverage(path, '/eha/state')
+    states, gaps = recording.seq_coverage(path, T.STATE.path)
     out = {'recording_bytes': size, 'recording_bytes_per_hour': size * 3600.0 / wall,
            'recorded_states': states, 'recorded_state_seq_gaps': gaps}
     for topic, v in sorted(summ.items()):

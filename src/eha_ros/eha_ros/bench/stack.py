@@ -12,6 +12,8 @@ from __future__ import annotations
 import importlib
 import time
 
+from ..core import topics as T
+
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 GOALS = {'answered_fraction': 0.999, 'latency_p99_s': 1e-3, 'cpu_total_cores': 1.0,
          'batch_sim_per_wall': 50.0}
@@ -102,7 +104,7 @@ class _Viewer:
         from ..tools.ws_client import FoxgloveClient
         self.client = c = FoxgloveClient(f'ws://127.0.0.1:{port}', timeout=60)
         c.keep = False
-        c.wait_for(lambda: {'/eha/state', '/eha/estimate', '/eha/command'} <= set(c.channels),
+        c.wait_for(lambda: {T.STATE.path, T.ESTIMATE.path, T.COMMAND.path} <= set(c.channels),
                    60, 'the loop topics advertised')
         c.poll(1.0)                      # the rest of the topics
         c.subscribe(sorted(c.channels))

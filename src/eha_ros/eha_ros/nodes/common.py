@@ -20,25 +20,29 @@ import time
 from typing import Callable
 
 from ..core.config.cli import guarded
+from ..core import topics
 from ..core.config.params import ParamError, Schema, ROS_BUILTINS, load, parse_ros_args
 
-# QoS of the 1 kHz streams: reliable, a queue deep enough that a recorder or monitor that
-# falls behind for a while (lock-step bursts, start-up) does not lose samples.
-STREAM_DEPTH = 100
+
+def qos_of(spec, depth: int | None = None):
+    """The rclpy QoSProfile of a topic of core.topics (or of its plain-data Qos), with
+    ``depth`` instead of the table's where an endpoint wants a deeper queue."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    q = getattr(spec, 'qos', spec)
+    return QoSProfile(depth=q.depth if depth is None else depth,
+                      reliability=ReliabilityPolicy[q.reliability.upper()],
+                      history=HistoryPolicy[q.history.upper()],
+                      durability=DurabilityPolicy[q.durability.upper()])
 
 
 def stream_qos():
-    from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
-    return QoSProfile(depth=STREAM_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
-                      history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+    """The 1 kHz streams' QoS (core.topics.STREAM)."""
+    return qos_of(topics.STREAM)
 
 
 def latched_qos():
-    """For low-rate state that late joiners need (channel select, redundancy status)."""
-    from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
-    return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                      history=HistoryPolicy.KEEP_LAST,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    """For low-rate state that late joiners need (core.topics.LATCHED)."""
+    return qos_of(topics.LATCHED)
 
 
 def clock_s(node) -> float:
@@ -178,7 +182,7 @@ def _bound(cls, transport):
                 {'transport': transport, '__module__': cls.__module__})
 
 
-PLANT_STATE_TOPIC = 'eha/plant_state'
+PLANT_STATE_TOPIC = topics.PLANT_STATE.name
 
 
 class PlantState:

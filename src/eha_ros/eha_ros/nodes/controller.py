@@ -28,12 +28,13 @@ from ..core.controller.tick_sync import TickSync
 from ..core.controller.velocity_loop import drive_mismatch
 from ..core.estimator.adapt import VERDICTS
 from ..core.loop import safe_state as SAFE
-from ..core.loop.stats import Counters, LoopStats
+from ..core.stats import Counters, LoopStats
 from ..core.redundancy.state_machine import FAILED_SAFE
 from . import diag
 from .managed import autostart, state_label, transition
-from .common import (PLANT_STATE_TOPIC, clock_s, declare_and_validate, factory, latched_qos,
-                     publish_counted, run, stream_qos)
+from .common import (PLANT_STATE_TOPIC, clock_s, declare_and_validate, factory, publish_counted,
+                     qos_of, run)
+from ..core import topics as T
 
 
 class Controller(LifecycleNodeMixin):
@@ -70,17 +71,18 @@ class Controller(LifecycleNodeMixin):
                              counters=self.c)                 # references <-> estimates
         self.loop = LoopStats(self.Ts)
         self.cmd = ActuatorCommand()
-        qos = stream_qos()
-        self.pub = self.create_publisher(ActuatorCommand, 'eha/command', qos)
+        self.pub = self.create_publisher(ActuatorCommand, T.COMMAND.name, qos_of(T.COMMAND))
         self.pub_diag = diag.publisher(self)
         # eha/plant_state first: the executor takes ready subscriptions in this order, so
         # an ACTIVE that arrived (acknowledged) before a state is seen before its estimate
         self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
-                                 latched_qos())
-        self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
-        self.create_subscription(PositionReference, 'eha/reference', self.on_reference, qos)
-        self.create_subscription(RedundancyStatus, 'eha/redundancy', self.on_redundancy,
-                                 latched_qos())
+                                 qos_of(T.PLANT_STATE))
+        self.create_subscription(PositionEstimate, T.ESTIMATE.name, self.on_estimate,
+                                 qos_of(T.ESTIMATE))
+        self.create_subscription(PositionReference, T.REFERENCE.name, self.on_reference,
+                                 qos_of(T.REFERENCE))
+        self.create_subscription(RedundancyStatus, T.REDUNDANCY.name, self.on_redundancy,
+                                 qos_of(T.REDUNDANCY))
         # checking at half the watchdog time keeps the reaction within watchdog_ticks
         # without a second 1 kHz callback in the executor
         self.create_timer(max(self.Ts, 0.5 * self.watchdog_s), self.watchdog)

@@ -17,9 +17,10 @@ from eha_msgs.msg import ActuatorState, PositionEstimate
 from ..core.estimator.estimator import Estimator
 from ..core.estimator.fault_detector import NAMES
 from ..core.estimator.params import SCHEMA
-from ..core.loop.stats import Counters, LoopStats
+from ..core.stats import Counters, LoopStats
 from . import diag
-from .common import clock_s, declare_and_validate, factory, publish_counted, run, stream_qos
+from .common import clock_s, declare_and_validate, factory, publish_counted, qos_of, run
+from ..core import topics as T
 
 STATE_QUEUE_DEPTH = 20      # states (20 ms at 1 kHz): rides out short stalls without a long backlog
 
@@ -40,14 +41,12 @@ class EstimatorNode:
         self.stale = False
         self.stale_seq = 0
         self.msg = PositionEstimate()
-        qos = stream_qos()
-        self.pub = self.create_publisher(PositionEstimate, 'eha/estimate', qos)
+        self.pub = self.create_publisher(PositionEstimate, T.ESTIMATE.name, qos_of(T.ESTIMATE))
         # a deeper input queue: after a scheduling stall the queued states are still
         # answered (their provisional stale predictions are replaced), not dropped
-        in_qos = stream_qos()
-        in_qos.depth = STATE_QUEUE_DEPTH
         self.pub_diag = diag.publisher(self)
-        self.create_subscription(ActuatorState, 'eha/state', self.on_state, in_qos)
+        self.create_subscription(ActuatorState, T.STATE.name, self.on_state,
+                                 qos_of(T.STATE, depth=STATE_QUEUE_DEPTH))
         self.create_timer(self.p['estimator.node.timer_period'], self.on_timer)
         self.create_timer(self.p['estimator.node.diagnostics_period'],
                           self.publish_diagnostics)

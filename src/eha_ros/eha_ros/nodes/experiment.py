@@ -32,12 +32,13 @@ from std_msgs.msg import String
 from ..core.ident.experiments import Limits, build
 from ..core.ident.params import SCHEMA
 from ..core.ident.run import ExperimentRun
-from ..core.loop.stats import LoopStats
+from ..core.stats import LoopStats
 from . import diag
-from .common import (PLANT_STATE_TOPIC, declare_and_validate, factory, latched_qos,
-                     publish_counted, run, stream_qos)
+from .common import (PLANT_STATE_TOPIC, declare_and_validate, factory,
+                     publish_counted, qos_of, run)
+from ..core import topics as T
 
-TOPIC = 'eha/experiment'
+TOPIC = T.EXPERIMENT.name
 
 
 class Experiment:
@@ -60,25 +61,29 @@ class Experiment:
         self.plant_active = True           # eha/plant_state; not heard: taken as active
         self.done = False
         self.exit_code = 0
-        qos = stream_qos()
-        self.pub_info = self.create_publisher(String, TOPIC, latched_qos())
+        self.pub_info = self.create_publisher(String, TOPIC, qos_of(T.EXPERIMENT))
         self.pub_cmd = self.pub_ref = self.pub_load = None
         if self.drive:
             self.cmd = ActuatorCommand()
-            self.pub_cmd = self.create_publisher(ActuatorCommand, 'eha/command', qos)
+            self.pub_cmd = self.create_publisher(ActuatorCommand, T.COMMAND.name, qos_of(T.COMMAND))
         else:
             self.ref = PositionReference()
-            self.pub_ref = self.create_publisher(PositionReference, 'eha/reference', qos)
-            self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
+            self.pub_ref = self.create_publisher(PositionReference, T.REFERENCE.name,
+                                                 qos_of(T.REFERENCE))
+            self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command,
+                                     qos_of(T.COMMAND))
         if plan.load is not None:
             self.load = ExternalLoad()
-            self.pub_load = self.create_publisher(ExternalLoad, 'eha/sim/load_force', qos)
+            self.pub_load = self.create_publisher(ExternalLoad, T.LOAD_FORCE.name,
+                                                  qos_of(T.LOAD_FORCE))
         self.pub_diag = diag.publisher(self)
-        self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state, latched_qos())
-        self.create_subscription(ActuatorState, 'eha/state', self.on_state, qos)
-        self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
-        self.create_subscription(RedundancyStatus, 'eha/redundancy', self.on_redundancy,
-                                 latched_qos())
+        self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
+                                 qos_of(T.PLANT_STATE))
+        self.create_subscription(ActuatorState, T.STATE.name, self.on_state, qos_of(T.STATE))
+        self.create_subscription(PositionEstimate, T.ESTIMATE.name, self.on_estimate,
+                                 qos_of(T.ESTIMATE))
+        self.create_subscription(RedundancyStatus, T.REDUNDANCY.name, self.on_redundancy,
+                                 qos_of(T.REDUNDANCY))
         self.create_timer(p['experiment.diagnostics_period'], self.publish_diagnostics)
         self.get_logger().info(f'experiment {plan.kind}: {plan.summary}; '
                                f'{plan.duration_s:.1f} s planned')

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import sys
 
-from ..core.bridge.params import SCHEMA
+from ..core.hardware.bridge_params import SCHEMA
 from ..core.config.registry import LOOP_PREFIX
 from .common import run
 from .plant_side import Program, make_node as make_plant_side

@@ -39,12 +39,13 @@ from ..core.config.cli import UsageError
 from ..core.hardware.gate import CommandGate
 from ..core.hardware.interface import HardwareError
 from ..core.config.params import ParamError, Schema
-from ..core.loop.stats import Counters, Histogram, RingStats
+from ..core.stats import Counters, Histogram, RingStats
 from . import diag
 from .common import (PlantState, StartGate, bind, channel_ok, declare_and_validate,
                      latched_qos, publish_counted, stream_qos)
 from .compose import unlocked
 from .managed import state_label, transition
+from ..core import topics as T
 
 MAX_CATCH_UP = 20              # periods: further behind, the loop resynchronises
 SUPERVISE_PERIOD = 0.02        # s: pending lifecycle transitions are carried out this often
@@ -106,29 +107,29 @@ class PlantSide(LifecycleNodeMixin):
         self.done, self.exit_code = False, 0
         self.fatal = ''                       # start-up: a symbol map the PLC refuses
         self.state_msg, self.truth_msg = ActuatorState(), PlantTruth()
-        self.state_topic = self.resolve_topic_name('eha/state')
+        self.state_topic = self.resolve_topic_name(T.STATE.name)
         if program.exclusive:
             self.refuse_if_other_plant(p[q + 'startup_discovery'])
 
         qos = stream_qos()
-        self.pub_state = self.create_publisher(ActuatorState, 'eha/state', qos)
-        self.pub_truth = (self.create_publisher(PlantTruth, 'eha/sim/truth', qos)
+        self.pub_state = self.create_publisher(ActuatorState, T.STATE.name, qos)
+        self.pub_truth = (self.create_publisher(PlantTruth, T.TRUTH.name, qos)
                           if self.hw.has_truth else None)
         self.pub_diag = diag.publisher(self)
         self.pub_clock = self.create_publisher(Clock, '/clock', 10) if self.lockstep else None
         self.plant_state = PlantState(self)
         self.plant_state.set(False)
-        self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
+        self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command, qos)
         if hasattr(self.hw, 'set_load'):
-            self.create_subscription(ExternalLoad, 'eha/sim/load_force',
+            self.create_subscription(ExternalLoad, T.LOAD_FORCE.name,
                                      lambda m: self.hw.set_load(m.force), qos)
-        self.create_subscription(ChannelSelect, 'eha/channel_select', self.on_select,
+        self.create_subscription(ChannelSelect, T.CHANNEL_SELECT.name, self.on_select,
                                  latched_qos())
         if hasattr(self.hw, 'inject_fault'):
-            self.create_service(InjectFault, 'eha/inject_fault', self.on_fault)
+            self.create_service(InjectFault, T.INJECT_FAULT.name, self.on_fault)
         if program.bridge_services:
-            self.create_service(SetBool, 'eha/bridge/arm', self.on_arm)
-            self.create_service(Trigger, 'eha/bridge/reset', self.on_reset)
+            self.create_service(SetBool, T.BRIDGE_ARM.name, self.on_arm)
+            self.create_service(Trigger, T.BRIDGE_RESET.name, self.on_reset)
         self.start_gate = StartGate(
             self, p[q + 'start_after'], self.state_topic.rsplit('/', 1)[0] + '/',
             p[q + 'start_timeout'],

@@ -11,7 +11,7 @@ import sys
 
 from ..core.config.registry import LOOP_PREFIX
 from ..core.hardware.sim import SimHardware
-from ..core.plant.node_params import SCHEMA
+from ..core.hardware.sim_params import SCHEMA
 from .common import run
 from .plant_side import Program, make_node as make_plant_side
 

@@ -28,11 +28,12 @@ from lifecycle_msgs.msg import State
 from ..core.config.params import default_config_dir, load
 from ..core.io.report import run_dir
 from ..core.sweep.params import SCHEMA, build_plan
-from ..core.loop.stats import LoopStats
+from ..core.stats import LoopStats
 from ..core.sweep.session import from_params, print_table
 from . import diag
 from .common import (PLANT_STATE_TOPIC, declare_and_validate, factory, latched_qos, publish_counted,
                      run, stream_qos)
+from ..core import topics as T
 
 MARGIN_TICKS = 30           # data of a tick is complete this many ticks after its state
 
@@ -71,7 +72,7 @@ class Sweep:
         self.load_msg = ExternalLoad()
         self.pub_load = None
         if self.session.excite == 'load':
-            self.pub_load = self.create_publisher(ExternalLoad, 'eha/sim/load_force',
+            self.pub_load = self.create_publisher(ExternalLoad, T.LOAD_FORCE.name,
                                                   stream_qos())
         self.loop = LoopStats(plan.Ts)
         self.ready_since = None
@@ -80,15 +81,15 @@ class Sweep:
         self.done = False
         self.exit_code = 0
         qos = stream_qos()
-        self.pub = self.create_publisher(PositionReference, 'eha/reference', qos)
+        self.pub = self.create_publisher(PositionReference, T.REFERENCE.name, qos)
         self.pub_diag = diag.publisher(self)
         self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
                                  latched_qos())
-        self.create_subscription(ActuatorState, 'eha/state', self.on_state, qos)
-        self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
-        self.create_subscription(PlantTruth, 'eha/sim/truth', self.on_truth, qos)
-        self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
-        self.create_subscription(RedundancyStatus, 'eha/redundancy', self.on_redundancy,
+        self.create_subscription(ActuatorState, T.STATE.name, self.on_state, qos)
+        self.create_subscription(PositionEstimate, T.ESTIMATE.name, self.on_estimate, qos)
+        self.create_subscription(PlantTruth, T.TRUTH.name, self.on_truth, qos)
+        self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command, qos)
+        self.create_subscription(RedundancyStatus, T.REDUNDANCY.name, self.on_redundancy,
                                  latched_qos())
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(

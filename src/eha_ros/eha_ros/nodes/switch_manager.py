@@ -24,10 +24,11 @@ from eha_msgs.srv import SwitchChannel
 from ..core.loop import safe_state as SAFE
 from ..core.redundancy import ChannelSample, EventLog, SwitchManager
 from ..core.redundancy.params import SCHEMA
-from ..core.loop.stats import Counters, LoopStats
+from ..core.stats import Counters, LoopStats
 from ..core.loop.supervisor import LoopSupervisor, SupervisorParams
 from . import diag
 from .common import declare_and_validate, factory, latched_qos, publish_counted, run, stream_qos
+from ..core import topics as T
 
 
 def _finite(*values) -> bool:
@@ -67,18 +68,18 @@ class SwitchManagerNode:
         realtime = not self.get_parameter('use_sim_time').value
         self.sup = LoopSupervisor(SupervisorParams.from_params(p, realtime))
         self.sup_reported = None
-        self.pub_select = self.create_publisher(ChannelSelect, 'eha/channel_select',
+        self.pub_select = self.create_publisher(ChannelSelect, T.CHANNEL_SELECT.name,
                                                 latched_qos())
-        self.pub_status = self.create_publisher(RedundancyStatus, 'eha/redundancy',
+        self.pub_status = self.create_publisher(RedundancyStatus, T.REDUNDANCY.name,
                                                 latched_qos())
         self.pub_diag = diag.publisher(self)
         qos = stream_qos()
         deep = stream_qos()
         deep.depth = 200            # a starved executor catches up instead of dropping
-        self.create_subscription(ActuatorState, 'eha/state', self.on_state, deep)
-        self.create_subscription(ActuatorCommand, 'eha/command', self.on_command, qos)
-        self.create_subscription(PositionEstimate, 'eha/estimate', self.on_estimate, qos)
-        self.create_service(SwitchChannel, 'eha/switch_channel', self.on_switch)
+        self.create_subscription(ActuatorState, T.STATE.name, self.on_state, deep)
+        self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command, qos)
+        self.create_subscription(PositionEstimate, T.ESTIMATE.name, self.on_estimate, qos)
+        self.create_service(SwitchChannel, T.SWITCH_CHANNEL.name, self.on_switch)
         from rclpy.clock import Clock, ClockType
         # wall time, also in lock-step: a stalled loop stops the simulated clock, and on the
         # simulated clock rclpy's EventsExecutor stopped firing these timers in most lock-step

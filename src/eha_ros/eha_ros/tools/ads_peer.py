@@ -20,6 +20,7 @@ import threading
 import time
 
 from ..core.config.cli import UsageError, guarded
+from ..core import topics as T
 
 PROG = 'ads_peer'
 
@@ -50,11 +51,11 @@ def parse(argv):
 def build(args):
     """The peer from the config folder and the arguments (not started)."""
     from ..core.sim.batch import node_params
-    from ..core.bridge.params import SCHEMA as BRIDGE
+    from ..core.hardware.bridge_params import SCHEMA as BRIDGE
     from ..core.bridge.peer import AdsPeer
     from ..core.bridge.symbols import load_symbol_map, resolve_path
     from ..core.config.params import default_config_dir
-    from ..core.plant.node_params import SCHEMA as SIM
+    from ..core.hardware.sim_params import SCHEMA as SIM
     config = args.config or default_config_dir()
     sim = node_params('plant_sim', SIM, config)
     bridge = node_params('hardware_bridge', BRIDGE, config)
@@ -84,8 +85,8 @@ class PeerNode:
         from ..nodes.common import stream_qos
         super().__init__('ads_peer')
         self.peer = peer
-        self.create_service(InjectFault, 'eha/inject_fault', self.on_fault)
-        self.create_subscription(ExternalLoad, 'eha/sim/load_force', self.on_load,
+        self.create_service(InjectFault, T.INJECT_FAULT.name, self.on_fault)
+        self.create_subscription(ExternalLoad, T.LOAD_FORCE.name, self.on_load,
                                  stream_qos())
 
     def on_fault(self, req, resp):

@@ -21,7 +21,8 @@ from ..core.config.params import load
 from ..core.plant.parameters import PLANT_SCHEMA
 from ..core.qft import bounds as qb
 from ..core.qft import antiwindup as aw
-from ..core.qft import minimax, cost, family, lti, plots, prefilter, pso, report, verify
+from ..core.controller import lti
+from ..core.qft import minimax, cost, family, plots, prefilter, pso, report, verify
 from ..core.qft.spec import load_spec
 
 PROG = 'design_qft'
@@ -161,13 +162,13 @@ def antiwindup_only(a, spec, plant):
 
 def load_plant(a) -> dict:
     """The design's nominal plant: --plant, with the plant.* keys of --plant-params over it
-    (core.plant.node_params.plant_file: one line for a bad file)."""
+    (core.hardware.sim_params.plant_file: one line for a bad file)."""
     if not a.plant_params:
         return load(PLANT_SCHEMA, [a.plant])
     if a.update_plant_yaml:
         raise UsageError('--update-plant-yaml writes the designed drive into --plant; with '
                          '--plant-params the drive is the identified one: give one of them')
-    from ..core.plant.node_params import plant_file
+    from ..core.hardware.sim_params import plant_file
     return load(PLANT_SCHEMA, [a.plant], plant_file(a.plant_params))
 
 

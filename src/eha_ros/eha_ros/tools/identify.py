@@ -123,7 +123,7 @@ def build_plans(config_dir: str, kinds) -> dict:
 
 def plant_overrides(items, config_dir: str) -> list[str]:
     """The -p items, checked: plant_sim's plant.* (or sim_node.seed), values in range."""
-    from ..core.plant.node_params import SCHEMA
+    from ..core.hardware.sim_params import SCHEMA
     from ..core.sim.batch import node_params
     over = {}
     for item in items:
@@ -172,10 +172,10 @@ def fit_function():
 def probe_drive(config_dir: str) -> str:
     """The PLC of config/hardware_bridge.yaml answers with a matching symbol table and its
     drive reports no fault on the active couple; what it said, or a UsageError."""
-    from ..core.bridge.params import SCHEMA
+    from ..core.hardware.bridge_params import SCHEMA
     from ..core.hardware.ads import AdsHardware
     from ..core.hardware.interface import HardwareError
-    from ..core.loop.stats import Counters
+    from ..core.stats import Counters
     from ..core.sim.batch import node_params
     p = node_params('hardware_bridge', SCHEMA, config_dir)
     if p['bridge.backend'] != 'ads':

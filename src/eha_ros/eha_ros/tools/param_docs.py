@@ -117,7 +117,9 @@ def render() -> str:
         'this schema before ROS starts (`.venv/bin/python -m eha_ros.tools.check_config '
         '--node NODE FILE...` checks files without starting anything). Units are SI; '
         '"required" means the key has no default and must be set in a params file; '
-        'range bounds are inclusive.',
+        'range bounds are inclusive. A file of `config/` lists only the keys that differ '
+        'from these defaults (or that a user is expected to edit); tests/test_config_home.py '
+        'keeps it so.',
         '',
     ]
     lines += [f'- [{node}](#{node}) ({len(schema.params)})' for node, schema in nodes]

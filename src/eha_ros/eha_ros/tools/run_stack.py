@@ -202,9 +202,9 @@ def node_overrides(params, nodes, live: bool) -> dict:
 
 def plant_overrides(path: str, config_dir: str) -> list[str]:
     """-p plant_sim:KEY:=VALUE of every plant.* key the params file ``path`` sets for plant_sim
-    (core.plant.node_params.plant_file): node-targeted, so they reach plant_sim alone, also
+    (core.hardware.sim_params.plant_file): node-targeted, so they reach plant_sim alone, also
     composed in eha_loop with the estimator and controller."""
-    from ..core.plant.node_params import plant_file
+    from ..core.hardware.sim_params import plant_file
     out = []
     for key, value in plant_file(path, config_dir).items():
         out += ['-p', f'plant_sim:{key}:={override_arg(value)}']

@@ -1,6 +1,7 @@
 """tune_estimator: derive the estimator's adaptive-state noise, projection ranges, sensor band
 and jump step from the Table 4.5 family and the sensor model (core.estimator.tuning), print
-them, and with --write put them into config/estimator.yaml (comments kept).
+them, and with --write put them into their one home: the TUNED table of
+core/estimator/params.py, the defaults of those estimator.* keys (no YAML file restates them).
 
 It reads no noise seed. A tuning is checked with campaigns on the tuning seeds 1-5
 (scripts/campaign ... --seeds tuning); the figures of record come from the held-out seeds
@@ -9,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import sys
 
 from ..core.config.cli import guarded
@@ -19,6 +19,9 @@ from ..core.plant.parameters import PLANT_SCHEMA
 from ..core.qft.spec import load_spec
 
 PROG = 'tune_estimator'
+PARAMS_PY = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                         'core', 'estimator', 'params.py')
+BEGIN, END = '# BEGIN tune_estimator', '# END tune_estimator'
 
 
 def parse(argv):
@@ -29,8 +32,10 @@ def parse(argv):
                     help='family ranges (family.*_range), default config/qft_spec.yaml')
     ap.add_argument('--plant', default=os.path.join(cfg, 'plant.yaml'),
                     help='sensor model (plant.sensors.*)')
-    ap.add_argument('--out', default=os.path.join(cfg, 'estimator.yaml'))
-    ap.add_argument('--write', action='store_true', help='update --out in place')
+    ap.add_argument('--out', default=PARAMS_PY,
+                    help='Python file with the TUNED table (default: core/estimator/params.py)')
+    ap.add_argument('--write', action='store_true',
+                    help='rewrite the TUNED table of --out in place')
     d = tuning.Inputs(family={})
     for name in ('T_op', 'p_fa', 'margin', 'rho', 'T_memory', 'monitor_lowpass', 'jump_k'):
         ap.add_argument('--' + name.replace('_', '-'), type=float, default=getattr(d, name))
@@ -43,26 +48,29 @@ def fmt(v) -> str:
     return f'{v:.4g}' if abs(v) >= 1e-3 or v == 0 else f'{v:.4e}'
 
 
+def number(v) -> str:
+    """Python text of fmt(v) read back as a float (4 significant digits, a float even for 0)."""
+    if isinstance(v, list):
+        return '[' + ', '.join(number(x) for x in v) + ']'
+    return repr(float(fmt(v)))
+
+
+def table(values: dict) -> list[str]:
+    """The lines of the TUNED table (between the BEGIN and END markers)."""
+    return ['TUNED = {'] + [f'    {k!r}: {number(v)},' for k, v in values.items()] + ['}']
+
+
 def write(path: str, values: dict) -> None:
-    """Replace each key's value in the estimator YAML (nested keys, comments kept)."""
-    lines = open(path).read().split('\n')
-    for key, v in values.items():
-        *parents, leaf = key.split('.')
-        start = 0
-        for p in parents:                           # find the parent section in order
-            pat = re.compile(rf'^\s*{re.escape(p)}:\s*(#.*)?$')
-            start = next(i for i in range(start, len(lines)) if pat.match(lines[i])) + 1
-        pat = re.compile(rf'^(\s*{re.escape(leaf)}:\s*)([^#]*?)(\s*#.*)?$')
-        for i in range(start, len(lines)):
-            m = pat.match(lines[i])
-            if m:
-                head, comment = m.group(1) + fmt(v), (m.group(3) or '').strip()
-                col = len(m.group(1)) + len(m.group(2)) + len(m.group(3) or '') - len(comment)
-                lines[i] = (head.ljust(max(col, len(head) + 1)) + comment) if comment else head
-                break
-        else:
-            raise KeyError(f'{path}: estimator.{key} not found')
-    open(path, 'w').write('\n'.join(lines))
+    """Replace the TUNED table between the markers of ``path`` (the rest kept)."""
+    with open(path, encoding='utf-8') as fh:
+        lines = fh.read().split('\n')
+    try:
+        i, j = lines.index(BEGIN), lines.index(END)
+    except ValueError:
+        raise KeyError(f'{path}: no {BEGIN!r} ... {END!r} block') from None
+    lines[i + 1:j] = table(values)
+    with open(path, 'w', encoding='utf-8') as fh:
+        fh.write('\n'.join(lines))
 
 
 def main(argv=None) -> int:

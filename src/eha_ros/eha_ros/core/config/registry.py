@@ -45,9 +45,9 @@ class NodeInfo:
 
 _NODES = (
     NodeInfo('plant_sim', PLANT, ('plant.yaml', 'plant_sim.yaml'),
-             ('eha_ros.core.plant.node_params', 'SCHEMA'), loop_prefix='sim_node'),
+             ('eha_ros.core.hardware.sim_params', 'SCHEMA'), loop_prefix='sim_node'),
     NodeInfo('hardware_bridge', PLANT, ('plant.yaml', 'hardware_bridge.yaml'),
-             ('eha_ros.core.bridge.params', 'SCHEMA'), loop_prefix='bridge'),
+             ('eha_ros.core.hardware.bridge_params', 'SCHEMA'), loop_prefix='bridge'),
     NodeInfo('estimator', LOOP, ('plant.yaml', 'estimator.yaml'),
              ('eha_ros.core.estimator.params', 'SCHEMA')),
     NodeInfo('controller', LOOP, ('plant.yaml', 'controller.yaml', 'controller_node.yaml'),

@@ -19,17 +19,24 @@ TF = [Param(f'{name}.{part}', 'float[]', unit, doc=doc)
 
 NODE = Schema('controller', TF + [
     Param('control.stroke_margin', 'float', 'm', 0.005, 0.0, 0.05,
-          doc='references are clamped to +-(stroke/2 - margin)'),
+          doc='references are clamped to +-(stroke/2 - margin) (+-(60 - 5) mm)'),
     Param('control.rate_limit', 'float', 'm/s', 0.19, 1e-3, 10.0,
           doc='reference rate limit (Table 3.1: 190 mm/s)'),
     Param('control.accel_limit', 'float', 'm/s^2', 6.0, 0.0, 1000.0,
-          doc='acceleration of the move to a jumped reference (0: rate limit only)'),
+          doc='acceleration of the move to a jumped reference (0: rate limit only). The '
+              'drive\'s current limit bounds the piston acceleration at k_T I_max D_p / (J_eq '
+              'A_p): 7.4 m/s^2 on the weakest plant of Table 4.5 (k_T, D_p x0.8). With the '
+              'observer-form anti-windup a 5 mm step stays within the spec without this limit '
+              'too (0.14 %; tests/test_controller_core.py); references that move at most '
+              '190 mm/s per tick (sines, ramps) pass unchanged'),
     Param('control.antiwindup', 'bool', '', True,
-          doc='observer-form anti-windup with antiwindup.poles_* (false: none, L = 0)'),
+          doc='observer-form anti-windup with antiwindup.poles_* of controller.yaml '
+              '(core.controller.antiwindup; false: none, L = 0)'),
     Param('control.drive_limit_antiwindup', 'bool', '', True,
           doc='the anti-windup also bounds its actuator by the drive\'s reach beyond the '
               'measured motor speed of /eha/estimate (k_T I_max/Kp_w + k_T I_max/J_eq (Ts + '
-              'drive delay), from plant.*; core.controller.antiwindup.drive_reach): a held '
+              'drive delay), from plant.*: 133.5 rad/s with config/plant.yaml; '
+              'core.controller.antiwindup.drive_reach): a held '
               'piston or a motor starting from rest does not wind G up; false: the speed clamp '
               'only'),
     Param('control.prewarp_hz', 'float', 'Hz', 0.0, 0.0, 200.0,
@@ -42,14 +49,17 @@ NODE = Schema('controller', TF + [
               'last one (counted as reference_wait_timeouts, WARN once); a starved process '
               'is late by tens of ms on a loaded machine, a dead one never answers'),
     Param('control.switch_hold', 'float', 's', 0.0, 0.0, 1.0,
-          doc='state of G frozen this long after the active channel changes'),
+          doc='state of G frozen this long after the active channel changes (0: none; stack '
+              'controller, Table 3.4 switch: 20 ms measured 0.013 mm extra deviation against '
+              'the twin run vs 0.010 mm without)'),
     Param('control.drive_check_tolerance', 'float', '', 0.01, 0.0, 1.0,
           doc='relative mismatch between velocity_controller and plant.drive gains to report'),
     Param('control.autostart', 'str', '', 'active', choices=AUTOSTART,
           doc='lifecycle state to reach by itself at start-up: unconfigured (wait for a '
               'manager, e.g. run_stack), inactive (zero output) or active (controls while the '
               'plant side is active)'),
-    Param('control.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+    Param('control.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0,
+          doc='/diagnostics period'),
 ])
 
 

@@ -9,8 +9,8 @@ One call per estimate::
     motor speed omega_m -> the drive's reach (antiwindup.drive_reach) bounds the anti-windup's
     actuator u_a = clip(u_s, omega_m -+ reach)
 
-G is realised as one state space (a cascade of real first- and second-order sections, qft.lti)
-of any proper G(s); nothing assumes its structure. The per-tick arithmetic is
+G is realised as one state space (a cascade of real first- and second-order sections,
+controller.lti) of any proper G(s); nothing assumes its structure. The per-tick arithmetic is
 controller.stepper.control, the same compiled function the closed-loop kernels run.
 """
 from __future__ import annotations
@@ -22,8 +22,8 @@ import numpy as np
 from scipy import linalg, signal
 
 from ..kernel_records import entry_point
-from ..qft.lti import from_num_den
-from ..loop.stats import Counters
+from .lti import from_num_den
+from ..stats import Counters
 from . import stepper as S
 from .antiwindup import drive_reach, observer_gain, poles_from_params
 from .discrete import DiscreteSS, tustin

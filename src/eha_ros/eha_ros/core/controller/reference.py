@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from ..loop.stats import Counters
+from ..stats import Counters
 from . import stepper as S
 
 

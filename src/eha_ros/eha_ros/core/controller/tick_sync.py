@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from ..loop.stats import Counters
+from ..stats import Counters
 
 
 class TickSync:

@@ -16,15 +16,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kernel_records import entry_point
+from ..plant.hydromech import circuit, hydromech
 from ..plant.parameters import PlantParams
-from ..loop.stats import Counters
+from ..stats import Counters
 from . import adapt
 from . import fault_detector as fd
 from . import kernels
 from . import noise_level
 from . import stepper
-from .chamber_kf import ChamberKF, Circuit
-from .model_kf import HydroMech, ModelKF
+from .chamber_kf import ChamberKF
+from .model_kf import ModelKF
 from .pva import PvaKF
 
 
@@ -44,25 +45,6 @@ class EstimateResult:
     nis_dim: int = 0               # measurement dimension behind nis (0: no update)
     consistency: int = 0           # adapt.OK / MODEL / SENSOR / DISAGREE (adapt.VERDICTS)
     motor_speed: float = math.nan  # the model's input: the active motor's speed (rad/s)
-
-
-def hydromech(pp: PlantParams, leakage: str) -> HydroMech:
-    """Constants of eq. 4.35 with the p_D leakage choice (estimator.model.pd_leakage):
-    eq4_35 = C_eq beta/V_d as printed; eq3_22 = 2 C_eq beta/V_d as derived in eq. 3.22;
-    boost = 2 (C_p + C_c + C_r) beta/V_d: the boost check valves hold the low-pressure chamber
-    at the accumulator pressure, so both pump ports' external leakage C_r is drawn from the
-    high-pressure side (the plant at constant speed shows 5.2e-12 vs C_eq = 3.8e-12)."""
-    if leakage == 'boost':
-        return HydroMech(pp.A_p, pp.m_p, pp.b, pp.beta, pp.V_d, pp.C_p + pp.C_c + pp.C_r,
-                         pp.D_p, 2.0)
-    return HydroMech(pp.A_p, pp.m_p, pp.b, pp.beta, pp.V_d, pp.C_eq, pp.D_p,
-                     2.0 if leakage == 'eq3_22' else 1.0)
-
-
-def circuit(pp: PlantParams) -> Circuit:
-    """Constants of the chamber model from the plant parameters (Fig. 3.12 boost circuit)."""
-    return Circuit(pp.A_p, pp.m_p, pp.b, pp.beta, pp.V_d, pp.C_p + pp.C_c, pp.C_r, pp.D_p,
-                   pp.check_K, pp.acc_p_init, pp.check_crack, pp.band)
 
 
 def build_filter(p: dict):

@@ -2,25 +2,53 @@
 config/plant.yaml (the model of eq. 4.35 is built from the same plant parameters)."""
 from __future__ import annotations
 
-from ..config.params import Param, Schema
+from ..config.params import Param, ParamError, Schema, _chain
 from ..plant.parameters import PLANT_SCHEMA
 
 BAR = 1.0e5
 E = 'estimator.'
 
 
+# The numbers tools/tune_estimator derives from the Table 4.5 family, the robustness box and
+# the sensor model (core.estimator.tuning): their one home, rewritten by tune_estimator --write.
+# BEGIN tune_estimator
+TUNED = {
+    'model.p0_leakage': 6.236,
+    'model.q_leakage': 6.2362e-09,
+    'model.leakage_range': [-0.99, 30.41],
+    'model.p0_external_leakage': 6.236,
+    'model.q_external_leakage': 6.2362e-09,
+    'model.external_leakage_range': [-0.99, 36.5],
+    'model.p0_displacement': 0.003331,
+    'model.q_displacement': 0.0,
+    'model.displacement_range': [-0.325, 0.125],
+    'model.p0_compliance': 0.04218,
+    'model.q_compliance': 4.2185e-11,
+    'model.compliance_range': [-0.5833, 0.9167],
+    'model.p0_friction': 0.1818,
+    'model.q_friction': 0.0,
+    'model.friction_range': [-0.875, 1.375],
+    'model.leakage_excitation': 0.0,
+    'model.offset_bound': 0.0002532,
+    'monitor.band': 0.00021362,
+    'monitor.lowpass': 5.0,
+    'fault.jump_step': 0.00014142,
+}
+# END tune_estimator
 
-def _adaptive(name, symbol, adapt_doc, q, q_max, p0, p0_max, rng, lo, hi) -> list:
+
+def _adaptive(name, symbol, adapt_doc, q_max, p0_max, lo, hi) -> list:
     """The four parameters of one adaptive model state (core.estimator.adapt): its switch
-    adapt_<name>, random walk q_<name>, initial variance p0_<name> and projection range."""
+    adapt_<name>, random walk q_<name>, initial variance p0_<name> and projection range
+    (defaults: TUNED)."""
     m = E + 'model.'
     return [Param(m + f'adapt_{name}', 'bool', '', True, doc=adapt_doc),
-            Param(m + f'q_{name}', 'float', '', q, 0.0, q_max,
+            Param(m + f'q_{name}', 'float', '', TUNED[f'model.q_{name}'], 0.0, q_max,
                   doc=f'per-step random-walk variance of {symbol}'),
-            Param(m + f'p0_{name}', 'float', '', p0, 0.0, p0_max,
-                  doc=f'initial variance of {symbol}'),
-            Param(m + f'{name}_range', 'float[]', '', rng, lo, hi, min_len=2,
-                  doc=f'projection range of {symbol} [lo, hi]')]
+            Param(m + f'p0_{name}', 'float', '', TUNED[f'model.p0_{name}'], 0.0, p0_max,
+                  doc=f'initial variance of {symbol} (family spread)'),
+            Param(m + f'{name}_range', 'float[]', '', TUNED[f'model.{name}_range'], lo, hi,
+                  min_len=2, doc=f'projection range of {symbol} [lo, hi]')]
 
 
 ESTIMATOR = Schema('estimator', [
@@ -37,7 +65,7 @@ ESTIMATOR = Schema('estimator', [
               'eq4_35 = states x, xdot, p_D of eq. 4.35 (model_kf)'),
     Param(E + 'model.pd_leakage', 'str', '', 'eq3_22', choices=('boost', 'eq3_22', 'eq4_35'),
           doc='eq4_35 structure only: p_D leakage: boost = 2 (C_p+C_c+C_r) beta/V_d, '
-              'eq3_22 = 2 C_eq beta/V_d, eq4_35 = C_eq beta/V_d'),
+              'eq3_22 = 2 C_eq beta/V_d (as the plant), eq4_35 = C_eq beta/V_d (as printed)'),
     Param(E + 'model.friction', 'str', '', 'stribeck', choices=('stribeck', 'eq4_36'),
           doc='chambers: piston friction of the model: stribeck = the plant curve of eq. 3.33 '
               '(plant.friction F_c, F_s, v_s; Table 3.7) at the pump-flow velocity, low-passed '
@@ -46,72 +74,86 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.rest_velocity', 'float', 'm/s', 3e-3, 0.0, 1.0,
           doc='stribeck: the piston is at rest while the pump-flow velocity stays below this '
               'for rest_time (stiction: the friction is whatever holds it)'),
-    Param(E + 'model.rest_time', 'float', 's', 0.1, 0.0, 100.0),
+    Param(E + 'model.rest_time', 'float', 's', 0.1, 0.0, 100.0,
+          doc='stribeck: how long the pump-flow velocity stays below rest_velocity before the '
+              'piston counts as at rest (stiction)'),
     Param(E + 'model.q_load_rest', 'float', 'N^2', 1000.0, 0.0, 1e12,
           doc='stribeck: per-step variance added to the force state\'s random walk while the '
               'piston is at rest (stiction: the holding force is whatever holds it; the friction '
-              'input is held)'),
+              'input is held). Campaigns over the family tried 1e2, 1e3, 3e3, 1e4: above 1e3 '
+              'a 1 mm sensor bias at rest is no longer told from motion'),
     Param(E + 'model.F_s', 'float', 'N', 800.0, 0.0, 1.0e5,
-          doc='friction bound of eq. 4.36'),
+          doc='friction bound of eq. 4.36 (thesis: 800 N; friction: eq4_36 only)'),
     Param(E + 'model.v_eps', 'float', 'm/s', 1.0e-2, 1.0e-6, 0.1,
-          doc='pump-flow velocity over which eq. 4.36 friction reaches full sign'),
+          doc='pump-flow velocity D_p w/A_p over which eq. 4.36 friction reaches full sign '
+              '(choice)'),
     Param(E + 'model.friction_pressure', 'bool', '', False,
-          doc='use the measured p_D in min(|p_D A_p|, F_s) of eq. 4.36 (adds pressure noise)'),
+          doc='use the measured p_D in min(|p_D A_p|, F_s) of eq. 4.36 (injects the 0.45 bar '
+              'p_D noise as force noise)'),
     Param(E + 'model.friction_lowpass', 'float', 'Hz', 50.0, 0.0, 500.0,
           doc='low-pass of the motor speed that gives eq. 4.36 its sign of xdot (0 = none): '
               'command chatter above it must not flip the modelled friction'),
     Param(E + 'model.pressure_lowpass', 'float', 'Hz', 30.0, 0.1, 500.0,
-          doc='low-pass of the measured p_D used as a model input (friction, leakage column)'),
+          doc='low-pass of the measured p_D used as a model input (friction, leakage column; '
+              'choice)'),
     Param(E + 'model.sensor_gm', 'bool', '', True,
-          doc='add the position sensor Gauss-Markov offset as a state (coloured noise)'),
+          doc='add the position sensor\'s low-frequency Gauss-Markov offset as a state '
+              '(coloured noise, Fig. 4.6)'),
     Param(E + 'model.leak_state', 'bool', '', True,
           doc='eq4_35 structure only: add a leakage-coefficient correction state '
-              '(1e-12 m^3/(s Pa) units)'),
+              '(1e-12 m^3/(s Pa) units): the boost check valves make C_eff != C_eq'),
     Param(E + 'model.q', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-16, 1e-10, 1e6], 0.0, 1e20,
-          min_len=3, doc='per-step process noise variances of x, xdot, p_D (p_D: eq4_35 only)'),
+          min_len=3, doc='per-step process noise variances of x, xdot, p_D (p_D: eq4_35 only; '
+                         'tuned, SIL)'),
     Param(E + 'model.q_chamber', 'float', 'Pa^2', 1.0e4, 0.0, 1e20,
-          doc='per-step process noise variance of each chamber pressure (chambers structure)'),
+          doc='per-step process noise variance of each chamber pressure (chambers structure; '
+              'tuned, SIL)'),
     Param(E + 'model.p0', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-8, 1e-4, 1e10], 0.0, 1e20,
           min_len=3, doc='initial variances of x, xdot, p_D'),
     Param(E + 'model.q_leak', 'float', '(1e-12 m^3/(s Pa))^2', 1e-8, 0.0, 1e6,
           doc='per-step random-walk variance of the leakage correction'),
-    Param(E + 'model.p0_leak', 'float', '(1e-12 m^3/(s Pa))^2', 4.0, 0.0, 1e6),
+    Param(E + 'model.p0_leak', 'float', '(1e-12 m^3/(s Pa))^2', 4.0, 0.0, 1e6,
+          doc='initial variance of the leakage correction (2e-12 m^3/(s Pa) sigma)'),
     Param(E + 'model.load_state', 'bool', '', True,
-          doc='add an external-force state (random walk) so a static load does not bias x'),
+          doc='add an external-force state (random walk) so a static load balances the measured '
+              'p_D instead of biasing x (23 kN: 26 um vs 251 um without)'),
     Param(E + 'model.q_load', 'float', 'N^2', 1e-4, 0.0, 1e12,
           doc='per-step random-walk variance of the external force (stribeck friction: the '
-              'load; eq4_36: the load and every friction error)'),
+              'load; eq4_36: the load and every friction error); 1e-4: 0.01 N per tick'),
     Param(E + 'model.q_load_jump', 'float', 'N^2', 1e8, 0.0, 1e14,
           doc='per-step variance of the external force after a sample whose pressure '
               'innovation exceeds load_jump_z (a load step; adjustable-level process noise)'),
     Param(E + 'model.load_jump_z', 'float', '', 5.0, 0.0, 1e300,
           doc='normalised pressure innovation above which the force state takes q_load_jump'),
     Param(E + 'model.p0_load', 'float', 'N^2', 1e8, 0.0, 1e14,
-          doc='initial variance of the external force'),
-    # adaptive model states and projection (chambers structure; core.estimator.adapt).
-    # Defaults = config/estimator.yaml = scripts/tune_estimator's values (Table 4.5 + box,
-    # sensor model).
+          doc='initial variance of the external force (1e8: 10 kN sigma)'),
+    # adaptive model states and projection (chambers structure; core.estimator.adapt, issue 15):
+    # relative corrections of the uncertain flow parameters of Table 4.5 as random-walk states,
+    # projected onto their ranges. Defaults: TUNED (p0, q, ranges DERIVED by
+    # tools/tune_estimator from the Table 4.5 family + box and the sensor model,
+    # core.estimator.tuning).
     *_adaptive('leakage', 'lambda', 'chambers: relative leakage correction lambda as a state '
                '(C_p + C_c x (1+lambda); every leakage without adapt_external_leakage)',
-               6.2362e-09, 1e6, 6.236, 1e6, [-0.99, 30.41], -1.0, 1e3),
-    Param(E + 'model.leakage_excitation', 'float', 'Pa', 0.0, 0.0, 1e8,
-          doc='lambda is updated only while |p_A - p_B| exceeds this (dead zone)'),
+               1e6, 1e6, -1.0, 1e3),
+    Param(E + 'model.leakage_excitation', 'float', 'Pa', TUNED['model.leakage_excitation'],
+          0.0, 1e8,
+          doc='lambda is updated only while |p_A - p_B| exceeds this (dead zone; '
+              'tune_estimator)'),
     *_adaptive('external_leakage', 'epsilon', 'chambers: relative correction epsilon of the '
                'per-port leakage C_r as a state (C_r x (1+epsilon)); lambda then scales the '
-               'cross-port C_p + C_c only', 6.2362e-09, 1e6, 6.236, 1e6, [-0.99, 36.5], -1.0, 1e3),
+               'cross-port C_p + C_c only', 1e6, 1e6, -1.0, 1e3),
     *_adaptive('displacement', 'delta', 'chambers: relative displacement correction delta as a '
-               'state (D_p x (1+delta))', 0, 1.0, 0.003331, 1.0, [-0.325, 0.125], -0.9, 1.0),
+               'state (D_p x (1+delta))', 1.0, 1.0, -0.9, 1.0),
     *_adaptive('compliance', 'kappa', 'chambers: relative compliance correction kappa as a state '
-               '(V_d/beta x (1+kappa))', 4.2185e-11, 1.0, 0.04218, 10.0, [-0.5833, 0.9167],
-               -0.9, 10.0),
+               '(V_d/beta x (1+kappa))', 1.0, 10.0, -0.9, 10.0),
     *_adaptive('friction', 'phi', 'chambers with stribeck friction: relative friction correction '
-               'phi as a state (F_c, F_s x (1+phi))', 0.0, 1.0, 0.1818, 10.0, [-0.875, 1.375],
-               -0.99, 10.0),
+               'phi as a state (F_c, F_s x (1+phi))', 1.0, 10.0, -0.99, 10.0),
     Param(E + 'model.flow_state', 'bool', '', True,
           doc='chambers with stribeck friction: an unmodelled flow v_f (velocity units, A_p v_f '
               'into A, out of B) as a state, opened at rest while the sensor offset is '
               'implausible, bounded by the leakage of the pressure difference beyond friction '
-              '(adapt.flow_noise)'),
+              '(adapt.flow_noise): a persistent velocity bias at rest is not a sensor offset '
+              '(issue 15)'),
     Param(E + 'model.q_flow', 'float', '(m/s)^2', 1e-9, 0.0, 1.0,
           doc='per-step random walk of v_f while open (closed: 0)'),
     Param(E + 'model.flow_gate', 'float', '', 2.0, 0.0, 1e6,
@@ -155,83 +197,135 @@ ESTIMATOR = Schema('estimator', [
               'sqrt(S) exceeds this (0: always): a fast transient the model cannot explain '
               '(an unknown load step) must not be taken for a parameter change'),
     Param(E + 'model.compliance_lowpass', 'float', 'Hz', 0.0, 0.0, 1e4,
-          doc='low-pass of the pressure increments that carry the compliance flow (0: none)'),
+          doc='low-pass of the pressure increments that carry the compliance (kappa) flow (0: '
+              'none; 10-30 Hz measured worse)'),
     Param(E + 'model.q_x_disagree', 'float', 'm^2', 1e-8, 0.0, 1.0,
           doc='per-step position process noise while filter and sensor disagree beyond the '
               'band (monitor.band): the estimate is pulled back to the measurement'),
-    Param(E + 'model.offset_bound', 'float', 'm', 2.5320e-04, 0.0, 0.01,
+    Param(E + 'model.offset_bound', 'float', 'm', TUNED['model.offset_bound'], 0.0, 0.01,
           doc='projection bound of the sensor Gauss-Markov offset state |b| (0: none): the '
               'estimate stays within it of the measurement'),
-    # consistency monitor (core.estimator.adapt.monitor)
-    Param(E + 'monitor.lowpass', 'float', 'Hz', 5, 0.01, 500.0,
-          doc='low-pass of the measurement-minus-estimate disagreement'),
-    Param(E + 'monitor.band', 'float', 'm', 2.1362e-04, 1e-7, 0.1,
-          doc='sensor error band: a larger low-passed disagreement is DISAGREE'),
+    # consistency monitor (core.estimator.adapt.monitor), verdict: ok | model_mismatch |
+    # sensor_fault | filter_sensor_disagree
+    Param(E + 'monitor.lowpass', 'float', 'Hz', TUNED['monitor.lowpass'], 0.01, 500.0,
+          doc='low-pass of the measurement-minus-estimate disagreement z - x_hat '
+              '(tune_estimator)'),
+    Param(E + 'monitor.band', 'float', 'm', TUNED['monitor.band'], 1e-7, 0.1,
+          doc='sensor error band: a larger low-passed disagreement is DISAGREE '
+              '(tune_estimator)'),
     Param(E + 'monitor.debounce', 'int', 'samples', 10, 1, 100000),
     Param(E + 'monitor.hold_time', 'float', 's', 0.5, 0.0, 100.0,
           doc='a verdict stays reported this long after its condition clears'),
-    # sensor noise model (the filter's R)
+    # sensor noise model (the filter's R); the defaults match plant.sensors
     Param(E + 'noise.position_sigma', 'float', 'm', 1.0e-5, 1e-9, 1e-2,
-          doc='white position noise sigma (R of the position)'),
+          doc='white position noise sigma (R of the position; 10 um)'),
     Param(E + 'noise.position_gm_sigma', 'float', 'm', 2.0e-5, 0.0, 1e-2,
-          doc='low-frequency (Gauss-Markov) position noise sigma, Fig. 4.6'),
-    Param(E + 'noise.position_gm_corner', 'float', 'Hz', 1.0, 1e-3, 100.0),
+          doc='low-frequency (Gauss-Markov) position noise sigma, Fig. 4.6 (20 um)'),
+    Param(E + 'noise.position_gm_corner', 'float', 'Hz', 1.0, 1e-3, 100.0,
+          doc='corner frequency of the Gauss-Markov position noise'),
     Param(E + 'noise.pressure_sigma', 'float', 'Pa', 0.316 * BAR, 1.0, 1e7,
-          doc='one pressure sensor sigma; p_D gets twice its variance'),
+          doc='one pressure sensor sigma (0.316 bar, sec. 4.1.2); p_D gets twice its '
+              'variance'),
     Param(E + 'noise.adapt', 'bool', '', True,
           doc='chambers: measure the position and pressure sensors\' noise level online and '
-              'scale R (and the Gauss-Markov state\'s q) by it (core.estimator.noise_level)'),
+              'scale R (and the Gauss-Markov state\'s q) by it (second differences of its '
+              'readings; core.estimator.noise_level, issue 15)'),
     Param(E + 'noise.adapt_time', 'float', 's', 5.0, 0.01, 1e6,
           doc='memory of the noise-level measurement'),
     Param(E + 'noise.adapt_range', 'float[]', '', [0.5, 3.0], 0.01, 100.0, min_len=2,
-          doc='range of the measured noise level, relative to the sigmas above [lo, hi]'),
+          doc='range of the measured noise level, relative to the sigmas above [lo, hi] (the '
+              'random box reaches x2)'),
     Param(E + 'noise.adapt_quiet_velocity', 'float', 'm/s', 0.02, 0.0, 10.0,
           doc='the level is measured only while the pump-flow velocity D_p |omega| / A_p is '
-              'below this (faster, the loop carries motion the filter does not follow)'),
+              'below this (faster, the loop carries motion the filter does not follow: a 3 Hz '
+              '3 mm sine chatters above ~35 mm/s)'),
     # PVA filter, eq. 4.30-4.34
     Param(E + 'pva.W', 'float', 'm^2/s^5', 100.0, 1e-12, 1e12,
-          doc='jerk noise intensity W, eq. 4.32'),
+          doc='jerk noise intensity W, eq. 4.32, appendix C.4'),
     Param(E + 'pva.R', 'float', 'm^2', 5.0e-10, 1e-16, 1.0,
-          doc='position noise variance, eq. 4.33'),
+          doc='position noise variance, eq. 4.33 (which prints 2.5e-8 for the bench MSP)'),
     Param(E + 'pva.p0', 'float[]', 'm^2, (m/s)^2, (m/s^2)^2', [1e-6, 1e-2, 1e2], 0.0, 1e20,
-          min_len=3, doc='initial variances, eq. 4.34'),
+          min_len=3, doc='initial variances, eq. 4.34 (which prints 100, 10, 100)'),
     # measurement validity
     Param(E + 'validity.position_margin', 'float', 'm', 5.0e-3, 0.0, 0.1,
           doc='accepted position: within +-(stroke/2 + margin)'),
-    Param(E + 'validity.pressure_min', 'float', 'Pa', 0.0, -1e6, 1e7),
-    Param(E + 'validity.pressure_max', 'float', 'Pa', 400.0 * BAR, 1e5, 1e9),
+    Param(E + 'validity.pressure_min', 'float', 'Pa', 0.0, -1e6, 1e7,
+          doc='pressure sensor range, gauge: lowest accepted reading (0 bar)'),
+    Param(E + 'validity.pressure_max', 'float', 'Pa', 400.0 * BAR, 1e5, 1e9,
+          doc='highest accepted pressure reading (400 bar)'),
     Param(E + 'validity.max_abs_motor_speed', 'float', 'rad/s', 1257.0, 1.0, 1e5,
-          doc='motor speeds beyond this are rejected (last good speed held)'),
+          doc='motor speeds beyond this are rejected (last good speed held; 1257 rad/s = '
+              '12000 rpm)'),
     # position-sensor fault detector
     Param(E + 'fault.jump_threshold', 'float', '', 8.0, 1.0, 1e6,
           doc='|innovation| / sqrt(S) above this counts towards a jump'),
     Param(E + 'fault.jump_debounce', 'int', 'samples', 3, 1, 10000),
-    Param(E + 'fault.jump_step', 'float', 'm', 1.4142e-04, 0.0, 0.1,
+    Param(E + 'fault.jump_step', 'float', 'm', TUNED['fault.jump_step'], 0.0, 0.1,
           doc='a jump must begin with an innovation step of at least this within one sample '
-              '(0: any); a smooth large innovation is a model mismatch, not a sensor jump'),
+              '(0: any); a smooth large innovation is a model mismatch, not a sensor jump '
+              '(tune_estimator)'),
     Param(E + 'fault.jump_pressure_veto', 'float', '', 8.0, 0.0, 1e300,
           doc='no jump when a pressure innovation of a debounce sample is above this '
               '(normalised): the piston moved by compressing the oil, the sensor did not jump'),
     Param(E + 'fault.stuck_samples', 'int', 'samples', 10, 2, 1000000,
-          doc='identical consecutive readings of the noisy sensor that mean stuck'),
+          doc='identical consecutive readings of the noisy sensor that mean stuck (10 um '
+              'noise, 1 um steps: 2.8 % per pair, 1e-14 for 10; was 25: 24 ms of a stuck '
+              'reading pulled the estimate 0.2 mm before isolation)'),
     Param(E + 'fault.stuck_tolerance', 'float', 'm', 0.0, 0.0, 1e-3,
           doc='readings closer than this count as identical'),
     Param(E + 'fault.drift_k', 'float', '', 0.5, 0.0, 100.0,
           doc='CUSUM allowance on the normalised innovation'),
-    Param(E + 'fault.drift_h', 'float', '', 300.0, 1.0, 1e9, doc='CUSUM alarm level'),
+    Param(E + 'fault.drift_h', 'float', '', 300.0, 1.0, 1e9,
+          doc='CUSUM alarm level (a 60 s nominal 1 Hz sine peaks near 10; 150 -> 300, issue '
+              '15: the adaptive model converging after a 10 kN step reached 167; a sensor '
+              'drift is reported by monitor DISAGREE, 1 mm/s in 0.28 s)'),
     Param(E + 'fault.drift_debounce', 'int', 'samples', 5, 1, 10000),
     Param(E + 'fault.hold_time', 'float', 's', 0.5, 0.0, 100.0,
           doc='a detected fault stays reported this long after its condition clears'),
     Param(E + 'fault.isolate', 'bool', '', True,
-          doc='skip the position update while a sensor fault (jump or stuck) is reported'),
+          doc='skip the position update (predict only, adapted model) while a sensor fault '
+              '(jump or stuck) is reported'),
     # Chinniah friction estimator (sec. 4.1.2) on the running estimate
     Param(E + 'chinniah.enabled', 'bool', '', False,
-          doc='run the 3-state/4-state friction estimators (eqs. 4.15-4.29) on the estimate'),
+          doc='run the Chinniah 3-state/4-state friction estimators (eqs. 4.15-4.29) on the '
+              'estimate'),
     # node
     Param(E + 'node.stale_time', 'float', 's', 0.005, 1e-4, 10.0,
           doc='no state for longer than this: publish predict-only estimates marked stale'),
-    Param(E + 'node.timer_period', 'float', 's', 0.001, 1e-4, 1.0),
-    Param(E + 'node.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+    Param(E + 'node.timer_period', 'float', 's', 0.001, 1e-4, 1.0,
+          doc='stale check period'),
+    Param(E + 'node.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0,
+          doc='/diagnostics period'),
 ])
 
-SCHEMA = PLANT_SCHEMA + ESTIMATOR
+RANGES = ('model.leakage_range', 'model.external_leakage_range', 'model.displacement_range',
+          'model.compliance_range', 'model.friction_range', 'noise.adapt_range')
+LOWPASS = ('model.friction_lowpass', 'model.pressure_lowpass', 'model.compliance_lowpass',
+           'monitor.lowpass')
+
+
+def check_ranges(p: dict) -> None:
+    """Each [lo, hi] range (the adaptive states' projection ranges, noise.adapt_range) has two
+    values with lo <= hi; validity.pressure_min <= validity.pressure_max."""
+    for key in RANGES:
+        v = p[E + key]
+        if len(v) != 2 or v[0] > v[1]:
+            raise ParamError(f'{E}{key} = {v!r}: expected [lo, hi] with lo <= hi', E + key)
+    lo, hi = p[E + 'validity.pressure_min'], p[E + 'validity.pressure_max']
+    if lo > hi:
+        raise ParamError(f'{E}validity.pressure_min = {lo!r}: expected <= '
+                         f'{E}validity.pressure_max ({hi!r})', E + 'validity.pressure_min')
+
+
+def check_corners(p: dict) -> None:
+    """Each low-pass corner of the estimator at most the Nyquist frequency 1/(2 plant.sim.Ts)
+    of its sample period."""
+    ts = p['plant.sim.Ts']
+    for key in LOWPASS:
+        f = p[E + key]
+        if f > 0.5 / ts:
+            raise ParamError(f'{E}{key} = {f!r}: expected <= the Nyquist frequency 1/(2 '
+                             f'plant.sim.Ts) = {0.5 / ts:g} Hz (plant.sim.Ts = {ts!r})', E + key)
+
+
+SCHEMA = PLANT_SCHEMA + Schema('estimator', ESTIMATOR.params, _chain(check_ranges, check_corners))

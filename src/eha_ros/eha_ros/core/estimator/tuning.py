@@ -1,5 +1,6 @@
 """Estimator tuning derived from the plant family and the sensor model (issue 15), not tuned
-at the nominal plant: what scripts/tune_estimator computes and writes to config/estimator.yaml.
+at the nominal plant: what scripts/tune_estimator computes and writes to the TUNED table of
+core/estimator/params.py (the one home of these defaults).
 
 Inputs: the Table 4.5 family (config/qft_spec.yaml, family.*), the robustness box beyond it
 (issue 15: C_eq x0.05..15, D_p x0.75..1.05, beta x0.6..1.5, sensor noise x1..2) and the
@@ -50,7 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from ..sim.family import load_box
+from ..qft.family_box import load_box
 from .adapt import lowpass_alpha
 
 @dataclass

@@ -18,7 +18,7 @@ import time
 from ..bridge.link import AdsLink, LinkError
 from ..bridge.symbols import int_range, load_symbol_map, resolve_path
 from ..config.params import default_config_dir
-from ..loop.stats import Counters
+from ..stats import Counters
 from .interface import Hardware, HardwareError, Reading
 from .staleness import Staleness
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 
-from ..loop.stats import Counters
+from ..stats import Counters
 
 
 class CommandGate:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..loop.stats import Counters
+from ..stats import Counters
 from .interface import Hardware, Reading
 from .staleness import Staleness
 

@@ -38,8 +38,12 @@ def loop_params(prefix: str, *, command_timeout: float, autostart: str,
         Param(f'{prefix}.command_timeout', 'float', 's', command_timeout, 1e-3, 10.0,
               doc='no command for this long: zero speed applied, reported'),
         Param(f'{prefix}.max_speed_rate', 'float', 'rad/s^2', max_speed_rate, 10.0, 1.0e9,
-              doc='rate limit of the applied speed reference'),
+              doc='rate limit of the applied speed reference while armed (plant_sim 1e9: '
+                  'none, the drive model ramps; hardware_bridge 5e5: the 5 mm step\'s largest '
+                  'jump is 4.75e5)'),
         Param(f'{prefix}.arm_max_command', 'float', 'rad/s', arm_max_command, 0.0, 1.0e5,
-              doc='activation is refused while |latest command| exceeds this'),
-        Param(f'{prefix}.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+              doc='activation (arming) is refused while |latest command| exceeds this '
+                  '(plant_sim 1e5: none)'),
+        Param(f'{prefix}.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0,
+              doc='/diagnostics period'),
     ]

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 
 from ..plant import EhaPlant
-from ..loop.stats import Counters
+from ..stats import Counters
 from .interface import Hardware, Reading
 
 

@@ -17,11 +17,12 @@ import numpy as np
 
 from ..config.cli import UsageError
 from ..io import recording as R
+from .. import topics as T
 
 EXPERIMENTS = ('drive', 'friction', 'leakage', 'validation')
 VERSION = 1
-STATE, COMMAND, REFERENCE, LOAD, META = ('/eha/state', '/eha/command', '/eha/reference',
-                                         '/eha/sim/load_force', '/eha/experiment')
+STATE, COMMAND, REFERENCE, LOAD, META = (T.STATE.path, T.COMMAND.path, T.REFERENCE.path,
+                                         T.LOAD_FORCE.path, T.EXPERIMENT.path)
 TYPES = {STATE: 'eha_msgs/msg/ActuatorState', COMMAND: 'eha_msgs/msg/ActuatorCommand',
          REFERENCE: 'eha_msgs/msg/PositionReference', LOAD: 'eha_msgs/msg/ExternalLoad',
          META: 'std_msgs/msg/String'}

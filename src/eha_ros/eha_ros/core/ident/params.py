@@ -27,10 +27,11 @@ NODE = Schema('experiment', [
     Param(E + 'stroke_margin', 'float', 'm', 0.005, 0.0, 0.05,
           doc='plans, and the measured position (else the run stops), stay this far inside '
               'the end stops'),
-    Param(E + 'exit_when_done', 'bool', '', True),
-    Param(E + 'diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+    Param(E + 'exit_when_done', 'bool', '', True, doc='the node exits when the plan is done'),
+    Param(E + 'diagnostics_period', 'float', 's', 1.0, 0.05, 60.0, doc='/diagnostics period'),
     Param(E + 'drive.freqs', 'float[]', 'Hz', [1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0], 0.01,
-          1000.0, doc='speed sines, one after the other (thesis Fig. 3.36: 1-15 Hz)'),
+          1000.0, doc='speed-reference sweep of the velocity loop: speed sines, one after the '
+                      'other (thesis Fig. 3.36: 1-15 Hz)'),
     Param(E + 'drive.amplitude', 'float', 'rad/s', RPM_1000, 0.1, 2000.0,
           doc='speed sine amplitude (thesis: 1000 rpm)'),
     Param(E + 'drive.periods', 'int', '', 6, 1, 10000, doc='periods per frequency'),
@@ -39,25 +40,30 @@ NODE = Schema('experiment', [
           doc='the slow proportional loop on the measured position added to the speed '
               'reference (keeps the piston in its stroke); at most the lowest sine / 5'),
     Param(E + 'friction.freqs', 'float[]', 'Hz', [0.25, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0], 0.01,
-          1000.0, doc='position sines of rising frequency, so of rising piston speed (Fig. '
-                      '3.40); the fit needs speeds past the ringing of the Stribeck fall'),
-    Param(E + 'friction.amplitude', 'float', 'm', 0.005, 1e-5, 0.1),
+          1000.0, doc='closed-loop position sines, no load, of rising frequency, so of rising '
+                      'piston speed (Fig. 3.40; 5 mm up to 5 Hz: 157 mm/s); the fit needs '
+                      'speeds past the ringing of the Stribeck fall'),
+    Param(E + 'friction.amplitude', 'float', 'm', 0.005, 1e-5, 0.1,
+          doc='position sine amplitude'),
     Param(E + 'friction.periods', 'int', '', 3, 1, 10000, doc='periods per frequency'),
     Param(E + 'friction.relax', 'float', 's', 0.5, 0.0, 60.0,
           doc='reference held at 0 between sines'),
     Param(E + 'leakage.loads', 'float[]', 'N', [5000.0, 10000.0, -5000.0, -10000.0],
-          -2e5, 2e5, doc='load levels on eha/sim/load_force in turn (F_L: + pushes towards -x)'),
+          -2e5, 2e5, doc='load levels on eha/sim/load_force in turn, reference at 0 (Fig. '
+                         '3.44; F_L: + pushes towards -x)'),
     Param(E + 'leakage.hold', 'float', 's', 4.0, 0.01, 600.0,
           doc='each level held this long (the motor speed that holds it settles)'),
     Param(E + 'leakage.ramp', 'float', 's', 0.2, 0.0, 60.0, doc='ramp between levels'),
     Param(E + 'leakage.rest', 'float', 's', 1.0, 0.0, 60.0, doc='no load before and after'),
     Param(E + 'validation.step', 'float', 'm', 0.005, 1e-5, 0.1,
-          doc='step of the reference, then back to 0'),
+          doc='closed-loop step of the reference (Fig. 3.45), held, then back to 0, held'),
     Param(E + 'validation.step_hold', 'float', 's', 1.5, 0.01, 60.0,
           doc='each step held this long'),
-    Param(E + 'validation.sine_hz', 'float', 'Hz', 1.0, 0.01, 1000.0),
-    Param(E + 'validation.sine_amplitude', 'float', 'm', 0.005, 1e-5, 0.1),
-    Param(E + 'validation.sine_periods', 'int', '', 4, 1, 10000),
+    Param(E + 'validation.sine_hz', 'float', 'Hz', 1.0, 0.01, 1000.0,
+          doc='frequency of the closed-loop sine (Fig. 3.45)'),
+    Param(E + 'validation.sine_amplitude', 'float', 'm', 0.005, 1e-5, 0.1,
+          doc='amplitude of the sine'),
+    Param(E + 'validation.sine_periods', 'int', '', 4, 1, 10000, doc='periods of the sine'),
     Param(E + 'validation.rest', 'float', 's', 0.5, 0.0, 60.0,
           doc='reference at 0 before the step and around the sine'),
 ])

@@ -21,7 +21,7 @@ YAML_KEYS = ('friction.F_c', 'friction.F_s', 'friction.v_s', 'friction.mu', 'dri
 
 def nominal_plant(config_dir: str | None):
     """The plant_sim node's plant as config/ gives it (PlantParams) and its parameter dict."""
-    from ..plant.node_params import SCHEMA
+    from ..hardware.sim_params import SCHEMA
     from ..plant.parameters import PlantParams
     from ..sim.batch import node_params
     values = node_params('plant_sim', SCHEMA, config_dir)

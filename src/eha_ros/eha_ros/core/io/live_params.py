@@ -146,5 +146,6 @@ SCHEMA = Schema('live', [
     Param('live.time_period', 'float', 's', 0.02, 0.001, 10.0,
           doc='sim time (header stamp of the newest message) broadcast to the viewer this '
               'often, with use_sim_time (lock-step)'),
-    Param('live.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+    Param('live.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0,
+          doc='/diagnostics period'),
 ], check)

@@ -20,5 +20,6 @@ SCHEMA = Schema('recorder', [
     Param('recorder.chunk_size', 'int', 'B', 1 << 18, 1024, 1 << 30,
           doc='MCAP chunk size before compression: the most a killed recorder loses (the '
               'chunk being filled; 256 KiB: about 0.3 s of the stack\'s streams)'),
-    Param('recorder.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0),
+    Param('recorder.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0,
+          doc='/diagnostics period'),
 ])

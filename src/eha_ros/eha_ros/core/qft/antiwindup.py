@@ -133,7 +133,7 @@ def design(G, F, dl, w, params: dict, seed: int = 0, maxiter: int = 15, maxfev: 
            start=None, progress=None):
     """(poles, figures): the poles minimising the worst overshoot of RUNS (+ settling, tails) with
     Re H >= 0 on the family and the output at the clamp of the error's sign while held
-    (penalised); G a qft.lti.Zpk, F as (num, den). Differential evolution over box(), then
+    (penalised); G a controller.lti.Zpk, F as (num, den). Differential evolution over box(), then
     Nelder-Mead from the better of its best and ``start`` (poles, e.g. the YAML's own)."""
     n = len(G.poles)
     num_den = G.num_den()

@@ -8,7 +8,7 @@ import numpy as np
 from . import bounds as qb
 from .family import I_X, C_row, TorqueFamily, CascadePlants, torque_responses
 from .freqresp import feedback, max_real_eig
-from .lti import Zpk, position_controller, velocity_controller
+from ..controller.lti import Zpk, position_controller, velocity_controller
 
 W_DENSE = np.logspace(-2, np.log10(3000.0), 240)
 

@@ -16,7 +16,7 @@ import numpy as np
 from ..plant import linear
 from ..plant.parameters import PlantParams
 from .freqresp import feedback, pad, ss_freqresp
-from .lti import Zpk, pade_delay
+from ..controller.lti import Zpk, pade_delay
 
 NAMES = ('C_eq', 'D_p', 'beta', 'k_T', 'k_E')
 I_W, I_X, I_V = 1, 2, 3          # state indices of omega, x, xdot in eq. 3.35

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import bounds as qb
-from .lti import prefilter
+from ..controller.lti import prefilter
 
 
 def band_grid(spec, n=200):

@@ -7,7 +7,7 @@ import numpy as np
 import yaml
 
 from ..config.params import ParamError
-from .lti import Zpk, from_num_den
+from ..controller.lti import Zpk, from_num_den
 
 NAMES = ('position_controller', 'prefilter', 'velocity_controller')
 

@@ -1,6 +1,7 @@
 """QFT design specification (config/qft_spec.yaml): schema and typed view (thesis 4.3.2, Table 4.5, 4.8)."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -9,48 +10,63 @@ from ..config.params import Param, ParamError, Schema, load
 
 S = 'spec.'
 QFT_SPEC_SCHEMA = Schema('design_qft', [
-    # Table 4.5 uncertainty (multipliers of the nominal value) and log-grid sizes
+    # Table 4.5 uncertainty (multipliers of the nominal value of config/plant.yaml) and the
+    # sizes of the log-spaced grids: 5*2*3*3*3 = 270 plants
     Param('family.C_eq_range', 'float[]', '', [0.1, 10.0], 1e-3, 1e3, min_len=2,
           doc='C_p, C_c, C_r scaled together'),
     Param('family.C_eq_n', 'int', '', 5, 1, 50),
     Param('family.D_p_range', 'float[]', '', [0.8, 1.0], 0.1, 10.0, min_len=2),
     Param('family.D_p_n', 'int', '', 2, 1, 50),
-    Param('family.beta_range', 'float[]', '', [0.7, 1.4], 0.1, 10.0, min_len=2),
+    Param('family.beta_range', 'float[]', '', [0.7, 1.4], 0.1, 10.0, min_len=2,
+          doc='x 1.379e9 Pa (Table 4.5\'s 1.379e7 is a typo)'),
     Param('family.beta_n', 'int', '', 3, 1, 50),
-    Param('family.k_T_range', 'float[]', '', [0.8, 1.2], 0.1, 10.0, min_len=2),
+    Param('family.k_T_range', 'float[]', '', [0.8, 1.2], 0.1, 10.0, min_len=2,
+          doc='x 0.73 Nm/A'),
     Param('family.k_T_n', 'int', '', 3, 1, 50),
-    Param('family.k_E_range', 'float[]', '', [0.8, 1.2], 0.1, 10.0, min_len=2),
-    Param('family.k_E_n', 'int', '', 3, 1, 50),
+    Param('family.k_E_range', 'float[]', '', [0.8, 1.2], 0.1, 10.0, min_len=2,
+          doc='x 0.53 V/(rad/s)'),
+    Param('family.k_E_n', 'int', '', 3, 1, 50,
+          doc='grid sizes C_eq, D_p, beta, k_T, k_E: 5*2*3*3*3 = 270 plants'),
     Param('family.nominal_scale', 'float[]', '', [1.0, 1.0, 1.0, 1.0, 1.0], 1e-3, 1e3, min_len=5,
           doc='nominal plant P0 = plant.yaml values times [C_eq, D_p, beta, k_T, k_E]'),
-    Param('bounds.phase_step_deg', 'float', 'deg', 5.0, 0.1, 30.0),
-    # velocity loop, eqs. 4.52, 4.58, 4.65, 4.68-4.70
-    Param('velocity.Ws', 'float', '', 1.16, 1.0001, 10.0),
-    Param('velocity.freqs', 'float[]', 'rad/s', [0.01, 0.1, 20.0, 200.0, 300.0, 500.0], 1e-6, 1e6),
+    Param('bounds.phase_step_deg', 'float', 'deg', 5.0, 0.1, 30.0,
+          doc='phase grid -360:step:0 deg (Table 4.7)'),
+    # velocity loop, eqs. 4.52, 4.58, 4.65, 4.68-4.70: G_v of eq. 4.65 on omega/i_ref
+    # (eq. 3.35, speed output)
+    Param('velocity.Ws', 'float', '', 1.16, 1.0001, 10.0,
+          doc='eq. 4.52 (PM ~ 51 deg, GM ~ 5.3 dB)'),
+    Param('velocity.freqs', 'float[]', 'rad/s', [0.01, 0.1, 20.0, 200.0, 300.0, 500.0],
+          1e-6, 1e6, doc='design frequencies, sec. 4.3.2'),
     Param('velocity.sens_corner', 'float', 'rad/s', 600.0, 1e-3, 1e6,
           doc='S^v(s) = (s/w)/(s/w + 1), eq. 4.58 as corrected in DESIGN.md'),
     Param('velocity.effort_w_min', 'float', 'rad/s', 200.0, 0.0, 1e6,
-          doc='eq. 4.69 soft term applies at design frequencies >= this'),
+          doc='eq. 4.69 soft term applies at design frequencies >= this (i = 4..6: 200, 300, '
+              '500 rad/s)'),
     Param('velocity.Tg_db', 'float', 'dB', 2.0, 0.0, 100.0, doc='T_g of eq. 4.69'),
     Param('velocity.K_min', 'float[]', '', [0.01, 1.0, 100.0], 1e-9, 1e9, min_len=3,
-          doc='PSO lower limits of K1 [Nm/(rad/s)], K2 [Nm/rad], K3 [rad/s]'),
+          doc='PSO box, lower limits of K1 [Nm/(rad/s)], K2 [Nm/rad], K3 [rad/s]'),
     Param('velocity.K_max', 'float[]', '', [10.0, 2000.0, 20000.0], 1e-9, 1e9, min_len=3),
     Param('velocity.iterations', 'int', '', 50, 1, 10000, doc='Table 4.8'),
-    # position loop, eqs. 4.51, 4.57, 4.59-4.63, 4.74, 4.75
-    Param('position.Ws', 'float', '', 1.305, 1.0001, 10.0),
+    # position loop, eqs. 4.51, 4.57, 4.59-4.63, 4.74, 4.75: G of eq. 4.74 on the
+    # closed-velocity-loop family x/omega_ref
+    Param('position.Ws', 'float', '', 1.305, 1.0001, 10.0, doc='eq. 4.51'),
     Param('position.stab_freqs', 'float[]', 'rad/s',
           [0.001, 0.01, 0.1, 1.0, 10.0, 20.0, 50.0, 100.0, 500.0], 1e-6, 1e6),
     Param('position.sens_freqs', 'float[]', 'rad/s', [0.1, 1.0, 10.0, 20.0, 50.0, 100.0], 1e-6, 1e6),
-    Param('position.sens_corner', 'float', 'rad/s', 30.0, 1e-3, 1e6, doc='S(s) of eq. 4.57'),
+    Param('position.sens_corner', 'float', 'rad/s', 30.0, 1e-3, 1e6,
+          doc='S(s) = (s/w)/(s/w + 1), eq. 4.57'),
     Param('position.stiff_freqs', 'float[]', 'rad/s', [1.0, 10.0, 30.0, 50.0], 1e-6, 1e6),
-    Param('position.M_gain', 'float', 'm/N', 2.0e-6, 1e-15, 1.0, doc='eq. 4.60'),
+    Param('position.M_gain', 'float', 'm/N', 2.0e-6, 1e-15, 1.0,
+          doc='M(s) = M_gain (s + M_zero)^2/(s + M_pole)^2, eq. 4.60 (2e-6: >= 49 kN/mm)'),
     Param('position.M_zero', 'float', 'rad/s', 600.0, 1e-3, 1e7),
     Param('position.M_pole', 'float', 'rad/s', 6000.0, 1e-3, 1e7),
     Param('position.track_freqs', 'float[]', 'rad/s', [0.01, 0.1, 1.0, 10.0, 30.0, 50.0], 1e-6, 1e6),
-    Param('position.a_up', 'float', 'rad/s', 30.0, 1e-3, 1e6, doc='eq. 4.62'),
+    Param('position.a_up', 'float', 'rad/s', 30.0, 1e-3, 1e6,
+          doc='T_up of eq. 4.62: a_up, zeta_up, w_n = wn_factor a_up / zeta_up'),
     Param('position.zeta_up', 'float', '', 0.8, 0.01, 10.0),
     Param('position.wn_factor', 'float', '', 1.25, 0.01, 100.0, doc='w_n = factor a_up / zeta'),
-    Param('position.low_pole', 'float', 'rad/s', 85.0, 1e-3, 1e6, doc='eq. 4.63'),
+    Param('position.low_pole', 'float', 'rad/s', 85.0, 1e-3, 1e6,
+          doc='T_low = 1/(1 + s/low_pole)^2, eq. 4.63'),
     Param('position.track_tol_db', 'float', 'dB', 0.05, 0.0, 10.0,
           doc='numerical tolerance on T_low/T_up (choice): below 0.1 rad/s |T_up|/|T_low| is '
               '< 1e-4 dB and a double-integrator loop overshoots 1 by micro-dB'),
@@ -66,12 +82,14 @@ QFT_SPEC_SCHEMA = Schema('design_qft', [
               's/wp + 1) in G (choice beyond eq. 4.74; thesis: 0)'),
     Param('position.zeta_min', 'float', '', 0.5, 0.01, 10.0,
           doc='range of the sections\' damping ratios; >= 0.5 keeps the controller free of '
-              'resonant poles (a second loop crossover)'),
+              'resonant poles (a second loop crossover: 0.3 gave one near 1.4 krad/s)'),
     Param('position.zeta_max', 'float', '', 1.0, 0.01, 10.0),
     Param('position.effort_freqs', 'float[]', 'rad/s', [100.0, 500.0], 1e-6, 1e6,
           doc='eq. 4.75 soft control-effort frequencies (k..l)'),
-    Param('position.m1', 'float', '', 1.0, 0.0, 1e9, doc='hard-constraint weight, eq. 4.75'),
-    Param('position.m2', 'float', '', 0.02, 0.0, 1e9, doc='soft effort weight, eq. 4.75'),
+    Param('position.m1', 'float', '', 1.0, 0.0, 1e9,
+          doc='hard-constraint weight, eq. 4.75 (per dB of bound violation)'),
+    Param('position.m2', 'float', '', 0.02, 0.0, 1e9,
+          doc='soft effort weight, eq. 4.75 (per dB of |L0| at effort_freqs)'),
     Param('position.iterations', 'int', '', 100, 1, 10000, doc='Table 4.8'),
     # PSO, Table 4.8
     Param('pso.particles', 'int', '', 49, 2, 10000),
@@ -79,11 +97,13 @@ QFT_SPEC_SCHEMA = Schema('design_qft', [
     Param('pso.C1', 'float', '', 2.0, 0.0, 10.0),
     Param('pso.C2', 'float', '', 2.0, 0.0, 10.0),
     Param('pso.v_max_frac', 'float', '', 0.2, 1e-3, 1.0,
-          doc='velocity clamp as fraction of the (log) range; W=0.9, C=2 diverges unclamped'),
+          doc='velocity clamp as fraction of the (log10) range (choice); W=0.9, C=2 diverges '
+              'unclamped'),
     Param('pso.stability_penalty', 'float', '', 1000.0, 0.0, 1e12,
           doc='added when any family member has a closed-loop eigenvalue with Re >= 0'),
-    Param('pso.Ws_weight', 'float', '', 10.0, 0.0, 1e9, doc='eq. 4.70 weight per dB over W_s'),
-    # prefilter, eq. 4.61, 4.77
+    Param('pso.Ws_weight', 'float', '', 10.0, 0.0, 1e9,
+          doc='eq. 4.70 weight per dB of max|T| over W_s on the family'),
+    # prefilter, eq. 4.61, 4.77: F(s) = (s/a + 1)/((s/b + 1)(s/c + 1)), the eq. 4.77 structure
     Param('prefilter.w_max', 'float', 'rad/s', 50.0, 1e-3, 1e6,
           doc='tracking band checked on a dense grid from min(track_freqs) to this'),
     Param('prefilter.bandwidth_min_hz', 'float', 'Hz', 9.0, 0.0, 1e4,
@@ -94,11 +114,12 @@ QFT_SPEC_SCHEMA = Schema('design_qft', [
     Param('digital.Ts', 'float', 's', 0.001, 1e-6, 1.0,
           doc='controller sample period (SIL tick, plant.sim.Ts)'),
     Param('digital.delay', 'float', 's', -1.0, -1.0, 1.0,
-          doc='position-loop delay T_d; < 0: derived, 1.5 Ts + plant.drive.delay (one sample '
-              'compute-to-apply, ZOH ~ Ts/2, drive FIFO)'),
+          doc='position-loop delay T_d; < 0: derived, 1.5 Ts + plant.drive.delay (= 2.5 ms; '
+              'one sample compute-to-apply, ZOH ~ Ts/2, drive FIFO)'),
     Param('digital.prewarp_w', 'float', 'rad/s', 0.0, 0.0, 1e6,
-          doc='Tustin prewarp frequency of G and F in the digital check (0: none)'),
-    Param('digital.step', 'float', 'm', 0.005, 1e-6, 1.0, doc='step of the step-response check'),
+          doc='Tustin prewarp frequency of G and F in the digital check (0: none, as the node)'),
+    Param('digital.step', 'float', 'm', 0.005, 1e-6, 1.0,
+          doc='step of the step-response check (F T, discrete)'),
     Param('digital.overshoot_max_pct', 'float', '%', 5.0, 0.0, 100.0),
     Param('digital.settling_max', 'float', 's', 0.3, 1e-3, 100.0, doc='2 % settling time limit'),
     Param('digital.settling_band', 'float', '', 0.02, 1e-4, 0.5),
@@ -178,33 +199,47 @@ class QftSpec:
         return 1.0 / (1 + s / self['position.low_pole']) ** 2
 
 
-def load_spec(path: str) -> QftSpec:
-    """Load and validate a qft_spec.yaml (ROS params file, node ``design_qft``)."""
-    vals = load(QFT_SPEC_SCHEMA, [path])
+def check(vals: dict) -> None:
+    """Range pairs: each family.*_range [min, max] with min <= max; velocity.K_min < K_max (3
+    values each); position.zp_min < zp_max <= pi/(2 digital.Ts); position.zeta_min < zeta_max;
+    prefilter.corner_min < corner_max; verify.w_min < w_max."""
     for key in ('family.C_eq_range', 'family.D_p_range', 'family.beta_range',
                 'family.k_T_range', 'family.k_E_range'):
         if len(vals[key]) != 2 or vals[key][0] > vals[key][1]:
-            raise ParamError(f'{path}: {key} = {vals[key]!r}: expected [min, max] with min <= max')
-    for lo, hi in (('velocity.K_min', 'velocity.K_max'),):
-        if len(vals[lo]) != 3 or len(vals[hi]) != 3 or any(a >= b for a, b in zip(vals[lo], vals[hi])):
-            raise ParamError(f'{path}: {lo}/{hi} = {vals[lo]!r}/{vals[hi]!r}: expected 3 values each '
-                             f'with min < max')
-    if vals['position.zp_min'] >= vals['position.zp_max']:
-        raise ParamError(f'{path}: position.zp_min = {vals["position.zp_min"]!r}: expected < '
-                         f'position.zp_max')
+            raise ParamError(f'{key} = {vals[key]!r}: expected [min, max] with min <= max', key)
+    lo, hi = 'velocity.K_min', 'velocity.K_max'
+    if len(vals[lo]) != 3 or len(vals[hi]) != 3 or any(a >= b for a, b in zip(vals[lo], vals[hi])):
+        raise ParamError(f'{lo}/{hi} = {vals[lo]!r}/{vals[hi]!r}: expected 3 values each '
+                         f'with min < max', lo)
+    for lo, hi in (('position.zp_min', 'position.zp_max'),
+                   ('position.zeta_min', 'position.zeta_max'),
+                   ('prefilter.corner_min', 'prefilter.corner_max'),
+                   ('verify.w_min', 'verify.w_max')):
+        if vals[lo] >= vals[hi]:
+            raise ParamError(f'{lo} = {vals[lo]!r}: expected < {hi} ({vals[hi]!r})', lo)
     nyq2 = np.pi / (2 * vals['digital.Ts'])
     if vals['position.zp_max'] > nyq2:
-        raise ParamError(f'{path}: position.zp_max = {vals["position.zp_max"]!r}: expected <= '
+        raise ParamError(f'position.zp_max = {vals["position.zp_max"]!r}: expected <= '
                          f'pi/(2 digital.Ts) = {nyq2:.6g} rad/s (not realisable at Ts = '
-                         f'{vals["digital.Ts"]:g} s)')
-    if vals['position.zeta_min'] >= vals['position.zeta_max']:
-        raise ParamError(f'{path}: position.zeta_min = {vals["position.zeta_min"]!r}: expected < '
-                         f'position.zeta_max')
-    if vals['verify.w_min'] >= vals['verify.w_max']:
-        raise ParamError(f'{path}: verify.w_min = {vals["verify.w_min"]!r}: expected < verify.w_max')
+                         f'{vals["digital.Ts"]:g} s)', 'position.zp_max')
+
+
+QFT_SPEC_SCHEMA.check = check
+
+
+def load_spec(path: str) -> QftSpec:
+    """Load and validate a qft_spec.yaml (ROS params file, node ``design_qft``)."""
+    vals = load(QFT_SPEC_SCHEMA, [path])
     return QftSpec(vals)
 
 
 def default_spec() -> QftSpec:
     """The schema defaults (= the shipped thesis specification)."""
     return QftSpec(QFT_SPEC_SCHEMA.validate({}))
+
+
+def configured_spec(config_dir: str | None = None) -> QftSpec:
+    """config/qft_spec.yaml if present, else the schema defaults (the thesis spec)."""
+    from ..config.params import default_config_dir
+    path = os.path.join(config_dir or default_config_dir(), 'qft_spec.yaml')
+    return load_spec(path) if os.path.isfile(path) else default_spec()

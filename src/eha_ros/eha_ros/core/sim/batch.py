@@ -45,7 +45,7 @@ class BatchStack:
         from ..estimator.estimator import Estimator
         from ..estimator.params import SCHEMA as EST
         from ..plant import EhaPlant
-        from ..plant.node_params import SCHEMA as SIM
+        from ..hardware.sim_params import SCHEMA as SIM
         ov = overrides or {}
         self.plant_params = node_params('plant_sim', SIM, config_dir, ov.get('plant_sim'))
         self.plant = EhaPlant(self.plant_params, seed=seed)

@@ -33,6 +33,7 @@ import numpy as np
 from ..config.cli import UsageError
 from ..config.params import ParamError
 from ..io.report import write_json
+from ..qft.spec import configured_spec
 from . import family as FAM
 from . import scenarios as SC
 
@@ -74,7 +75,7 @@ def nominal_params(config_dir: str | None = None, overrides=None) -> dict:
 def centre(path: str, config_dir: str | None = None) -> dict:
     """{'plant_sim:key': value} of the plant.* keys a params file sets (an identified plant):
     the scenario overrides that make it the family's centre; one-line UsageError."""
-    from ..plant.node_params import plant_file
+    from ..hardware.sim_params import plant_file
     try:
         return {f'plant_sim:{k}': v for k, v in plant_file(path, config_dir).items()}
     except ParamError as err:
@@ -130,7 +131,7 @@ def linear_columns(scn, fam: dict, nominal: dict, config_dir: str | None = None)
                          stiff_freqs_hz=p.get('freqs', linear.STIFF_FREQS_HZ), **kw)
     if scn.kind in ('load_step', 'stiffness'):
         c = linear.loaded_C_eq(nominal['plant_sim'], fam, p['force'])
-        hi = linear.default_spec(config_dir)['family.C_eq_range'][1]
+        hi = configured_spec(config_dir)['family.C_eq_range'][1]
         out['loaded_C_eq'] = c
         out['loaded_beyond_table'] = c > hi * (1 + 1e-9)
         scales[:, 0] = c
@@ -363,7 +364,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
     per core; or the Dask scheduler at ``scheduler``); ``client`` reuses an existing
     distributed.Client. ``resume=DIR`` finishes an interrupted campaign in DIR (scenario,
     family and seed are read from it). ``plant_params``: a params file whose plant.* keys (an
-    identified plant, core.plant.node_params.plant_file) are the family's centre, the plant the
+    identified plant, core.hardware.sim_params.plant_file) are the family's centre, the plant the
     multipliers scale; kept in the scenario's overrides, so a resume keeps it. Every user
     mistake is a UsageError with one line, raised before anything is written."""
     import pandas as pd

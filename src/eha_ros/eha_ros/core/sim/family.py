@@ -6,18 +6,15 @@ external share C_r of the leakage with C_eq = C_p + C_c + C_r/2 kept, eq. 3.22).
 """
 from __future__ import annotations
 
-import math
 import os
 
 import numpy as np
-import yaml
 
 from ..config.cli import UsageError
 from ..config.params import default_config_dir
 from ..qft.family import NAMES, grid_scales, scaled_params
+from ..qft.family_box import COLUMNS, EXTRA, load_box
 
-EXTRA = ('friction', 'noise', 'leak_split')
-COLUMNS = NAMES + EXTRA
 NOISE_KEYS = ('plant.sensors.position_sigma', 'plant.sensors.position_gm_sigma',
               'plant.sensors.pressure_sigma', 'plant.sensors.speed_sigma',
               'plant.sensors.current_sigma')
@@ -34,33 +31,6 @@ def _table(scales: np.ndarray, extra: dict | None = None) -> dict:
     out = {name: np.asarray(scales[:, i], float) for i, name in enumerate(NAMES)}
     for name in EXTRA:
         out[name] = np.asarray((extra or {}).get(name, np.ones(n)), float)
-    return out
-
-
-def load_box(path: str | None = None) -> dict:
-    """{column: (lo, hi, log)} of a random-family box YAML (config/campaigns/family_random.yaml)."""
-    path = path or os.path.join(default_config_dir(), 'campaigns', 'family_random.yaml')
-    try:
-        with open(path) as f:
-            doc = yaml.safe_load(f)
-    except (OSError, yaml.YAMLError) as err:
-        raise UsageError(f'{path}: cannot read the family box: {str(err).splitlines()[0]}')
-    box = doc.get('family') if isinstance(doc, dict) else None
-    if not isinstance(box, dict) or not box:
-        raise UsageError(f'{path}: expected a mapping "family:" of multiplier: {{min, max}}')
-    out = {}
-    for name, b in box.items():
-        if name not in COLUMNS:
-            raise UsageError(f'{path}: family.{name}: unknown multiplier, expected one of '
-                             f'{", ".join(COLUMNS)}')
-        try:
-            lo, hi, log = float(b['min']), float(b['max']), bool(b.get('log', False))
-        except (TypeError, KeyError, ValueError):
-            raise UsageError(f'{path}: family.{name}: expected {{min: number, max: number}}, '
-                             f'got {b!r}')
-        if not (0 < lo <= hi and math.isfinite(hi)):
-            raise UsageError(f'{path}: family.{name}: expected 0 < min <= max, got {lo}, {hi}')
-        out[name] = (lo, hi, log)
     return out
 
 

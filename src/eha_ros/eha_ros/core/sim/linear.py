@@ -26,7 +26,8 @@ import numpy as np
 
 from ..qft import family as qf
 from ..qft.freqresp import feedback, pad
-from ..qft.lti import Zpk, from_num_den, velocity_controller
+from ..qft.spec import configured_spec
+from ..controller.lti import Zpk, from_num_den, velocity_controller
 
 NAMES = qf.NAMES
 FREQS_HZ = (1, 2, 4, 7, 10, 15)
@@ -46,14 +47,6 @@ def default_controller(config_dir: str | None = None) -> dict:
     from .batch import node_params
     from ..controller.params import SCHEMA
     return node_params('controller', SCHEMA, config_dir)
-
-
-def default_spec(config_dir: str | None = None):
-    """config/qft_spec.yaml if present, else the schema defaults (the thesis spec)."""
-    from ..config.params import default_config_dir
-    from ..qft import spec as qs
-    path = os.path.join(config_dir or default_config_dir(), 'qft_spec.yaml')
-    return qs.load_spec(path) if os.path.isfile(path) else qs.default_spec()
 
 
 def controllers(plant: dict, controller: dict) -> tuple[Zpk, Zpk, Zpk]:
@@ -318,7 +311,7 @@ def bounds(spec=None, t=None, w=None) -> dict:
     'M_m_per_N', the stiffness bound 1/|M| in kN/mm 'stiffness_bound_kn_per_mm', |T_up|,
     |T_low| in dB, and 'f_hz' = w/2 pi."""
     from scipy import signal
-    spec = default_spec() if spec is None else spec
+    spec = configured_spec() if spec is None else spec
     t = np.linspace(0.0, 0.4, 801) if t is None else np.asarray(t, float)
     w = np.logspace(-1, np.log10(3000.0), 400) if w is None else np.asarray(w, float)
     a, z = spec['position.a_up'], spec['position.zeta_up']

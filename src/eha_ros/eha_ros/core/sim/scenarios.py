@@ -32,15 +32,15 @@ import yaml
 from ..config.cli import UsageError
 from ..config.registry import LOOP_NODES
 from ..config.params import default_config_dir
+from ..sweep.analysis import LOAD_STEP, load_step_figures
 
 # kind -> default params (SI units). Times in s from the start of the run.
 KINDS = {
     # 5 mm step; overshoot and 2 % settling of the truth, steady error averaged over
     # [t_step + steady[0], t_step + steady[1]]
     'step': dict(amplitude=5e-3, t_step=0.1, duration=1.6, band=0.02, steady=[1.0, 1.5]),
-    # load force step while holding 0 (positive F_L pushes towards negative x, eq. 3.23);
-    # peak |x| after it, mean |x| over [t_step + steady[0], t_step + steady[1]]
-    'load_step': dict(force=5e3, t_step=0.5, duration=5.0, steady=[3.5, 4.5]),
+    # load force step while holding 0 (sweep.analysis.LOAD_STEP, the sweep node's too)
+    'load_step': LOAD_STEP,
     # stepped sine of the reference: gain and phase of truth vs reference per frequency
     'sweep': dict(amplitude=1e-3, freqs=[1.0, 2.0, 4.0, 7.0, 10.0, 15.0], settle_periods=2,
                   periods=6),
@@ -374,22 +374,6 @@ def step_figures(s, p, Ts):
     if 'sensor_lf' in s:
         out['steady_error_sensor_m'] = float(abs(np.mean(s['sensor_lf'][after][win]) - a))
     return out
-
-
-def load_step_figures(s, p, Ts):
-    """Peak |x| after the load step; steady error over the window (target 0): of what the
-    position sensor reports without its white noise, truth + its Gauss-Markov offset (held,
-    nothing observes that offset, so no estimator can be charged for it), and of the truth
-    alone (``steady_error_truth_m``)."""
-    t, x = s['t'], s['truth']
-    after = t >= p['t_step'] - 1e-9
-    ta = t[after] - p['t_step']
-    win = (ta >= p['steady'][0]) & (ta <= p['steady'][1])
-    x0 = float(np.mean(x[(t < p['t_step']) & (t >= p['t_step'] - 0.2)]))
-    return {'peak_deviation_m': float(np.max(np.abs(x[after] - x0))),
-            'steady_error_m': float(abs(np.mean(s['sensor_lf'][after][win]))),
-            'steady_error_truth_m': float(abs(np.mean(x[after][win]))),
-            'estimate_error_m': float(abs(np.mean(s['estimate'][after][win] - x[after][win])))}
 
 
 def _stepped(s, p, Ts, u_key):

@@ -70,7 +70,7 @@ def run(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | No
     from .batch import BatchLoop
     from .closed_loop import (R_ACTIVE, R_BYPASS, R_EN, R_I, R_INNOV, R_NIS, R_STATE, R_T,
                                R_U, R_VALVE, R_W, R_WM, R_X, R_XM)
-    from ..plant.node_params import SCHEMA as PLANT_SIM
+    from ..hardware.sim_params import SCHEMA as PLANT_SIM
     plant = EhaPlant(node_params('plant_sim', PLANT_SIM, overrides=plant_overrides),
                      seed=scn.seed)
     Ts = plant.Ts

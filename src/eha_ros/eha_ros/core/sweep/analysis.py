@@ -113,8 +113,8 @@ def stiffness_kn_per_mm(point: Point) -> float:
 
 def stiffness_bound(config_dir: str | None = None):
     """f_hz -> 1/|M(j 2 pi f)| in kN/mm, the stiffness bound of eq. 4.60 (config/qft_spec.yaml)."""
-    from ..sim.linear import default_spec
-    spec = default_spec(config_dir)
+    from ..qft.spec import configured_spec
+    spec = configured_spec(config_dir)
     return lambda f_hz: float(1.0 / abs(spec.M(2 * math.pi * float(f_hz))) / 1e6)
 
 
@@ -134,3 +134,25 @@ def stiffness_summary(points: list[Point], bound=None) -> dict:
             'stiffness_min_kn_per_mm': min((r['stiffness_kn_per_mm'] for r in rows), default=None),
             'stiffness_min_ratio_to_bound': min(ratio) if ratio else None,
             'stiffness_meets_bound': bool(ratio) and min(ratio) >= 1.0}
+
+
+# load force step while holding 0 (positive F_L pushes towards negative x, eq. 3.23); peak |x|
+# after it, mean |x| over [t_step + steady[0], t_step + steady[1]]: the campaigns' load_step
+# scenario (core.sim.scenarios.KINDS) and the sweep node's load_step mode
+LOAD_STEP = dict(force=5e3, t_step=0.5, duration=5.0, steady=[3.5, 4.5])
+
+
+def load_step_figures(s, p, Ts):
+    """Peak |x| after the load step; steady error over the window (target 0): of what the
+    position sensor reports without its white noise, truth + its Gauss-Markov offset (held,
+    nothing observes that offset, so no estimator can be charged for it), and of the truth
+    alone (``steady_error_truth_m``)."""
+    t, x = s['t'], s['truth']
+    after = t >= p['t_step'] - 1e-9
+    ta = t[after] - p['t_step']
+    win = (ta >= p['steady'][0]) & (ta <= p['steady'][1])
+    x0 = float(np.mean(x[(t < p['t_step']) & (t >= p['t_step'] - 0.2)]))
+    return {'peak_deviation_m': float(np.max(np.abs(x[after] - x0))),
+            'steady_error_m': float(abs(np.mean(s['sensor_lf'][after][win]))),
+            'steady_error_truth_m': float(abs(np.mean(x[after][win]))),
+            'estimate_error_m': float(abs(np.mean(s['estimate'][after][win] - x[after][win])))}

@@ -8,7 +8,7 @@ sine of the reference stops after the first frequency below -3 dB when asked (st
 bandwidth is then bracketed by the last two points. A stiffness run (excite='load') drives the
 load force with the plan, holds the reference, and reports |F_L|/|x| per frequency (eq. 4.60).
 A load step (excite='load' with a step plan and ``load_step``) reports the figures of the batch
-campaigns' load_step scenario (core.sim.scenarios.load_step_figures) from the recorded truth,
+campaigns' load_step scenario (core.sweep.analysis.load_step_figures) from the recorded truth,
 the position sensor's Gauss-Markov offset and the estimate.
 """
 from __future__ import annotations
@@ -20,10 +20,11 @@ import threading
 
 import numpy as np
 
-from ..io.report import bode_png, stiffness_png, write_csv, write_json
+from ..io.report import write_csv, write_json
 from ..redundancy.state_machine import FAILED_SAFE
-from .analysis import (BANDWIDTH_DB, sine_point, stiffness_kn_per_mm, stiffness_summary,
-                       summarize)
+from .analysis import (BANDWIDTH_DB, LOAD_STEP, load_step_figures, sine_point,
+                       stiffness_kn_per_mm, stiffness_summary, summarize)
+from .plots import bode_png, stiffness_png
 
 COLUMNS = ('reference', 'estimate', 'measured', 'truth', 'command', 'motor_speed_0',
            'motor_speed_1', 'active_channel', 'load', 'sensor_offset')
@@ -101,7 +102,7 @@ class SweepSession:
     excite: 'reference' (the plan is the position reference) or 'load' (the plan is the
     external load force in N, the reference stays at ``position``). stop_at_db: end a stepped
     sine after the first point below this gain (None: run every frequency). load_step: the
-    load_step scenario's t_step and steady window (core.sim.scenarios.KINDS) for a load run
+    load_step scenario's t_step and steady window (core.sweep.analysis.LOAD_STEP) for a load run
     whose plan is a signals.Step: the summary holds its figures (LOAD_STEP_FIGURES)."""
 
     def __init__(self, plan, out_dir: str, meta: dict, output: str = 'auto',
@@ -255,10 +256,9 @@ class SweepSession:
 
     def _analyse_load_step(self) -> tuple[dict, str | None]:
         """(figures, None) of a finished load step, or ({}, why not). The figures are the batch
-        campaigns' (core.sim.scenarios.load_step_figures) with the held position as 0, the
+        campaigns' (core.sweep.analysis.load_step_figures) with the held position as 0, the
         step where the truth first reports the load minus one tick (the batch record's truth
         is the state at the start of a tick, the load acts during it)."""
-        from ..sim.scenarios import load_step_figures
         n, d = self.n_run, self.data
         if not np.isfinite(d['truth'][:n]).any():
             return {}, 'the load step needs /eha/sim/truth (the simulator\'s ground truth)'
@@ -367,7 +367,6 @@ class SweepSession:
 def from_params(p: dict, plan, out: str, meta: dict, model=None, **kw):
     """The SweepSession of validated sweep parameters (node and batch run alike)."""
     from .analysis import stiffness_bound
-    from ..sim.scenarios import KINDS
     stiff, step = p['sweep.mode'] == 'stiffness', p['sweep.mode'] == 'load_step'
     load = stiff or step
     return SweepSession(plan, out, meta, p['sweep.output'], p['sweep.abort_error'],
@@ -377,7 +376,7 @@ def from_params(p: dict, plan, out: str, meta: dict, model=None, **kw):
                         stop_at_db=BANDWIDTH_DB if p['sweep.stop_at_bandwidth'] and
                         p['sweep.mode'] == 'stepped' else None,
                         stiffness_bound=stiffness_bound() if stiff else None,
-                        load_step={k: KINDS['load_step'][k] for k in ('t_step', 'steady')}
+                        load_step={k: LOAD_STEP[k] for k in ('t_step', 'steady')}
                         if step else None, **kw)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from ..config.params import Param, Schema
 from ..plant.parameters import PLANT_SCHEMA
 from ..config.registry import LOOP_PREFIX
-from ..hardware.params import loop_params
+from .params import loop_params
 
 NODE = Schema('hardware_bridge', [
     Param('ads.ams_net_id', 'str', '', '127.0.0.1.1.1',
@@ -17,7 +17,7 @@ NODE = Schema('hardware_bridge', [
     Param('ads.sum_mode', 'str', '', 'readwrite', choices=('readwrite', 'separate'),
           doc='one sum read/write request per cycle (0xF082) or sum write + sum read'),
     Param('ads.link_loss_cycles', 'int', '', 3, 1, 1000,
-          doc='consecutive failed cycles that count as a lost link'),
+          doc='consecutive failed cycles that count as a lost link (latched)'),
     Param('ads.reconnect_period', 'float', 's', 0.5, 0.01, 60.0,
           doc='time between reconnection attempts while the link is down'),
     Param('bridge.symbol_map', 'str', '', 'ads_symbols.yaml',
