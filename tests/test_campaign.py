@@ -260,7 +260,7 @@ def test_load_step_steady_error_is_against_the_sensor_without_its_white_noise():
     """Decision 2: the steady error is |mean(truth + Gauss-Markov offset)| over the window, the
     truth's own beside it. With the white noise and the resolution off the measured position IS
     truth + offset, so the record's offset column (R_GM, both batch paths) is checked exactly."""
-    from eha_ros.core.sim.batch import BatchLoop
+    from eha_ros.core.sim.batch import build_loop
     from eha_ros.core.sim.closed_loop import R_GM, R_X0, R_XM
     nom = C.nominal_params()
     one = {c: 1.0 for c in F.COLUMNS}
@@ -269,7 +269,7 @@ def test_load_step_steady_error_is_against_the_sensor_without_its_white_noise():
     n = 600
     recs = []
     for fast in (True, False):
-        loop = SC.build_loop(nom, plant, 7)
+        loop = build_loop({**nom, 'plant_sim': plant}, 7)
         recs.append(loop.run(np.zeros(n), np.r_[np.zeros(100), np.full(n - 100, 5e3)],
                              fast=fast))
     np.testing.assert_array_equal(recs[0], recs[1])

@@ -369,21 +369,10 @@ def test_bad_parameter_is_one_line(key, value, needle):
 
 
 # ---------------------------------------------------------------- chamber model
-def test_chamber_model_with_both_valves_shut_has_the_p_D_row_of_eq_3_22(params):
-    """p_A' - p_B' of the chamber model (both check valves shut) is eq. 3.22's p_D row:
-    2 beta/V_d (D_p omega - A_p xdot - C_eq p_D), C_eq = C_p + C_c + C_r/2; the accumulator
-    terms cancel."""
+def test_chamber_model_is_stable_in_every_check_valve_state(params):
+    """Each of the four check-valve states gives a stable chamber model (that both shut is
+    eq. 3.22's p_D row: tests/test_hydromech.py)."""
     c = circuit(PlantParams.from_dict(params))
-    A, B = chamber_continuous(c, False, False)
-    A3, B3 = continuous(hydro(params, 'eq3_22'))
-    rng = np.random.default_rng(1)
-    for _ in range(5):
-        x, v, pa, pb = rng.normal(size=4) * (1e-3, 1e-2, 1e6, 1e6) + (0, 0, 1e6, 1e6)
-        w, fl = rng.normal(size=2) * (100.0, 300.0)
-        d = A @ (x, v, pa, pb) + B @ (w, fl, 1.0)
-        d3 = A3 @ (x, v, pa - pb) + B3 @ (w, fl)
-        assert d[2] - d[3] == pytest.approx(d3[2], rel=1e-9)
-        assert d[1] == pytest.approx(d3[1], rel=1e-12)
     for s_a in (False, True):            # every check-valve state is a stable model
         for s_b in (False, True):
             ev = np.linalg.eigvals(chamber_continuous(c, s_a, s_b)[0])

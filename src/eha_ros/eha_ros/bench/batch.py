@@ -46,21 +46,8 @@ def scenario(duration: float):
 
 def build(scn):
     """(BatchLoop, references, loads) as core.sim.switchover.run builds them."""
-    from ..core.sim.batch import BatchLoop, node_params
-    from ..core.sim import switchover as B
-    from ..core.plant import EhaPlant
-    from ..core.hardware.sim_params import SCHEMA as PLANT_SIM
-    plant = EhaPlant(node_params('plant_sim', PLANT_SIM), seed=scn.seed)
-    Ts = plant.Ts
-    ctl, hold = B.make_controller(Ts)
-    n = int(round(scn.duration / Ts))
-    refs = np.array([scn.reference(k * Ts) for k in range(n)])
-    loads = np.array([scn.load if k * Ts >= scn.load_time - 1e-9 else 0.0 for k in range(n)])
-    faults = B.schedule([(f[0], f[1:]) for f in sorted(scn.faults)], n, Ts)
-    commands = B.schedule([(c[0], c[1:]) for c in sorted(scn.commands)], n, Ts)
-    loop = BatchLoop(plant, B.make_estimator(), ctl, B.SwitchManager(B.switch_params()), hold,
-                     faults, commands)
-    return loop, refs, loads
+    from ..core.sim.switchover import build as build_scenario
+    return build_scenario(scn)
 
 
 def timed(fn):

@@ -23,6 +23,37 @@ def node_params(node: str, schema, config_dir: str | None = None, overrides=None
                 node=node)
 
 
+def nominal_params(config_dir: str | None = None, overrides=None) -> dict:
+    """{node: parameter dict} of the loop's nodes (plant_sim and core.config.registry's
+    LOOP_NODES) from their files in config/; ``overrides``: {'node:key': value} as -p
+    assignments (a scenario's)."""
+    from ..config.registry import LOOP_NODES, schema_for
+    return {n: node_params(n, schema_for(n), config_dir, overrides)
+            for n in ('plant_sim',) + LOOP_NODES}
+
+
+def build_loop(params: dict, seed: int, faults=None, commands=None, estimator: bool = True,
+               manager: bool = True, switch_hold: float | None = None) -> 'BatchLoop':
+    """The stack's closed loop in one process, the one place it is assembled: the plant of
+    params['plant_sim'] (noise ``seed``, at sim_node.initial_position), the estimator, the
+    position controller and the switch manager of params' other node dicts
+    (:func:`nominal_params`); without ``estimator`` the controller closes on the measurement,
+    without ``manager`` nothing switches. ``switch_hold`` (s) replaces control.switch_hold,
+    the controller's integrator hold on a switch. faults, commands: BatchLoop's."""
+    from ..controller.position import PositionController
+    from ..estimator.estimator import Estimator
+    from ..plant import EhaPlant
+    from ..redundancy.state_machine import SwitchManager
+    plant = EhaPlant(params['plant_sim'], seed=seed)
+    plant.reset(position=params['plant_sim']['sim_node.initial_position'])
+    c = params['controller']
+    hold = c['control.switch_hold'] if switch_hold is None else switch_hold
+    return BatchLoop(plant, Estimator(params['estimator']) if estimator else None,
+                     PositionController.from_params(c),
+                     SwitchManager(params['switch_manager']) if manager else None,
+                     int(round(hold / plant.Ts)), faults, commands)
+
+
 @dataclass
 class Tick:
     seq: int
@@ -40,23 +71,17 @@ class BatchStack:
     """Plant + estimator + controller cores; ``tick(reference, load)`` advances one Ts."""
 
     def __init__(self, config_dir: str | None = None, seed: int = 1, overrides=None):
-        from ..controller.params import SCHEMA as CTL
-        from ..controller.position import PositionController
-        from ..estimator.estimator import Estimator
-        from ..estimator.params import SCHEMA as EST
-        from ..plant import EhaPlant
-        from ..hardware.sim_params import SCHEMA as SIM
+        """``overrides``: {node: -p assignments} for plant_sim, estimator, controller."""
+        from ..config.registry import schema_for
         ov = overrides or {}
-        self.plant_params = node_params('plant_sim', SIM, config_dir, ov.get('plant_sim'))
-        self.plant = EhaPlant(self.plant_params, seed=seed)
-        self.plant.reset(position=self.plant_params['sim_node.initial_position'])
-        self.estimator = Estimator(node_params('estimator', EST, config_dir, ov.get('estimator')))
-        c = node_params('controller', CTL, config_dir, ov.get('controller'))
-        self.controller_params = c
-        self.controller = PositionController.from_params(c)
+        params = {n: node_params(n, schema_for(n), config_dir, ov.get(n))
+                  for n in ('plant_sim', 'estimator', 'controller')}
+        self._loop = build_loop(params, seed, manager=False)
+        self.plant_params, self.controller_params = params['plant_sim'], params['controller']
+        self.plant, self.estimator, self.controller = self._loop.plant, self._loop.est, \
+            self._loop.ctl
         self.Ts = self.plant.Ts
         self.k = 0
-        self._loop = None
 
     def tick(self, reference: float, load: float = 0.0) -> Tick:
         """One Ts by BatchLoop.tick (the stack's order and its safe state)."""
@@ -70,8 +95,6 @@ class BatchStack:
 
     @property
     def loop(self) -> 'BatchLoop':
-        if self._loop is None:
-            self._loop = BatchLoop(self.plant, self.estimator, self.controller)
         return self._loop
 
     def run(self, references, loads=None, fast: bool = True) -> dict:

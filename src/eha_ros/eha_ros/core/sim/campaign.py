@@ -35,6 +35,7 @@ from ..config.params import ParamError
 from ..io.report import write_json
 from ..qft.spec import configured_spec
 from . import family as FAM
+from .batch import nominal_params
 from . import scenarios as SC
 
 NODES = SC.NODES
@@ -62,14 +63,6 @@ class CampaignResult:
     @property
     def failed(self) -> int:
         return int(self.info['failed'])
-
-
-def nominal_params(config_dir: str | None = None, overrides=None) -> dict:
-    """{node: parameter dict} of the loop's nodes from config/ (core.config.registry.NODE_FILES);
-    ``overrides``: {'node:key': value} as -p assignments (a scenario's)."""
-    from .batch import node_params
-    from ..config.registry import schema_for
-    return {n: node_params(n, schema_for(n), config_dir, overrides) for n in NODES}
 
 
 def centre(path: str, config_dir: str | None = None) -> dict:

@@ -258,34 +258,21 @@ def signals(scn: Scenario, Ts: float):
 
 
 # ---------------------------------------------------------------------------- one run
-def build_loop(nominal: dict, plant: dict, seed: int, faults=None, commands=None):
-    """The stack's batch loop on one plant: plant from ``plant`` (the variant), estimator,
-    controller and switch manager from ``nominal`` (dicts of node parameters)."""
-    from .batch import BatchLoop
-    from ..estimator.estimator import Estimator
-    from .switchover import controller_from_params
-    from ..plant import EhaPlant
-    from ..redundancy.state_machine import SwitchManager
-    pl = EhaPlant(plant, seed=seed)
-    pl.reset(position=plant['sim_node.initial_position'])
-    ctl, hold = controller_from_params(nominal['controller'], pl.Ts)
-    return BatchLoop(pl, Estimator(nominal['estimator']), ctl,
-                     SwitchManager(nominal['switch_manager']), hold, faults, commands)
-
-
 def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool = True):
     """One run; returns (figures dict, decimated traces dict or None).
 
     multipliers: one family row (core.sim.family.COLUMNS; other keys are ignored)."""
     from .closed_loop import (R_ACTIVE, R_EN, R_FAULT, R_GM, R_STATE, R_U, R_VALVE, R_X0,
                               R_XHAT, R_XM)
+    from .batch import build_loop
     from .switchover import schedule
     from .family import plant_params
     plant = plant_params(nominal['plant_sim'], multipliers)
     Ts = plant['plant.sim.Ts']
     ref, load, faults, commands = signals(scn, Ts)
     n = len(ref)
-    loop = build_loop(nominal, plant, seed, schedule(faults, n, Ts), schedule(commands, n, Ts))
+    loop = build_loop({**nominal, 'plant_sim': plant}, seed, schedule(faults, n, Ts),
+                      schedule(commands, n, Ts))
     rec = loop.run(ref, load).T
     t = np.arange(n) * Ts
     sig = dict(t=t, reference=ref, load=load, truth=rec[R_X0], estimate=rec[R_XHAT],

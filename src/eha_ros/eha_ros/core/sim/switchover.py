@@ -9,9 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..plant import EhaPlant
 from ..redundancy.params import SCHEMA
-from ..redundancy.state_machine import STATE_CODES, SwitchManager  # noqa: F401 (callers)
+from ..redundancy.state_machine import STATE_CODES  # noqa: F401 (callers)
 from .batch import node_params
 
 
@@ -19,25 +18,6 @@ def switch_params(overrides: dict | None = None) -> dict:
     """switch_manager parameters from its files in config/ (the node registry's)."""
     named = {k if ':' in k else f'switch_manager:{k}': v for k, v in (overrides or {}).items()}
     return node_params('switch_manager', SCHEMA, overrides=named)
-
-
-def make_controller(Ts: float):
-    """The controller node's PositionController from the YAML it loads (not hardcoded)."""
-    from ..controller.params import SCHEMA as CSCHEMA
-    return controller_from_params(node_params('controller', CSCHEMA), Ts)
-
-
-def controller_from_params(p: dict, Ts: float):
-    """(PositionController, integrator hold on a switch in ticks) from controller parameters."""
-    from ..controller.position import PositionController
-    return PositionController.from_params(p), int(round(p['control.switch_hold'] / Ts))
-
-
-def make_estimator():
-    """The estimator node's core from the YAML it loads."""
-    from ..estimator.estimator import Estimator
-    from ..estimator.params import SCHEMA as ESCHEMA
-    return Estimator(node_params('estimator', ESCHEMA))
 
 
 @dataclass
@@ -57,6 +37,26 @@ class Scenario:
         return self.amplitude * math.sin(2.0 * math.pi * self.freq * t)
 
 
+def build(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | None = None,
+          use_estimator: bool = True, switch_hold: float | None = None):
+    """(BatchLoop, references, loads) of scenario ``scn`` (:func:`run`'s arguments): the loop of
+    core.sim.batch.build_loop on config/'s nodes."""
+    from .batch import build_loop, nominal_params
+    from ..hardware.sim_params import SCHEMA as PLANT_SIM
+    params = nominal_params()
+    params['plant_sim'] = node_params('plant_sim', PLANT_SIM, overrides=plant_overrides)
+    params['switch_manager'] = switch_params(overrides)
+    Ts = params['plant_sim']['plant.sim.Ts']
+    n = int(round(scn.duration / Ts))
+    refs = np.array([scn.reference(k * Ts) for k in range(n)])
+    loads = np.array([scn.load if k * Ts >= scn.load_time - 1e-9 else 0.0 for k in range(n)])
+    faults = schedule([(f[0], f[1:]) for f in sorted(scn.faults)], n, Ts)
+    commands = schedule([(c[0], c[1:]) for c in sorted(scn.commands)], n, Ts)
+    loop = build_loop(params, scn.seed, faults, commands, estimator=use_estimator,
+                      switch_hold=switch_hold)
+    return loop, refs, loads
+
+
 def run(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | None = None,
         use_estimator: bool = True, switch_hold: float | None = None, fast: bool = True) -> dict:
     """Closed loop with the switch manager; returns arrays (t, ref, x, x_meas, w[2], w_ref,
@@ -67,24 +67,9 @@ def run(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | No
     when /eha/redundancy reports SWITCHING or a new active channel.
     fast: compiled segments between events (core.sim.batch.BatchLoop, same numbers); False: every
     tick through the Python objects."""
-    from .batch import BatchLoop
     from .closed_loop import (R_ACTIVE, R_BYPASS, R_EN, R_I, R_INNOV, R_NIS, R_STATE, R_T,
-                               R_U, R_VALVE, R_W, R_WM, R_X, R_XM)
-    from ..hardware.sim_params import SCHEMA as PLANT_SIM
-    plant = EhaPlant(node_params('plant_sim', PLANT_SIM, overrides=plant_overrides),
-                     seed=scn.seed)
-    Ts = plant.Ts
-    mgr = SwitchManager(switch_params(overrides))
-    ctl, hold_ticks = make_controller(Ts)
-    if switch_hold is not None:
-        hold_ticks = int(round(switch_hold / Ts))
-    est = make_estimator() if use_estimator else None
-    n = int(round(scn.duration / Ts))
-    refs = np.array([scn.reference(k * Ts) for k in range(n)])
-    loads = np.array([scn.load if k * Ts >= scn.load_time - 1e-9 else 0.0 for k in range(n)])
-    faults = schedule([(f[0], f[1:]) for f in sorted(scn.faults)], n, Ts)
-    commands = schedule([(c[0], c[1:]) for c in sorted(scn.commands)], n, Ts)
-    loop = BatchLoop(plant, est, ctl, mgr, hold_ticks, faults, commands)
+                              R_U, R_VALVE, R_W, R_WM, R_X, R_XM)
+    loop, refs, loads = build(scn, overrides, plant_overrides, use_estimator, switch_hold)
     rec = loop.run(refs, loads, fast=fast).T
     cols = {'t': rec[R_T].copy(), 'x': rec[R_X].copy(), 'x_meas': rec[R_XM].copy(),
             'w_ref': rec[R_U].copy(), 'bypass': rec[R_BYPASS].copy(),
@@ -94,7 +79,7 @@ def run(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | No
             'enable': rec[R_EN:R_EN + 2] > 0.5, 'active': rec[R_ACTIVE].astype(int),
             'state': rec[R_STATE].astype(int)}
     cols['ref'] = np.array([scn.reference(t) for t in cols['t']])
-    cols.update(manager=mgr, responses=loop.responses, estimator=est is not None,
+    cols.update(manager=loop.mgr, responses=loop.responses, estimator=loop.est is not None,
                 fast_ticks=loop.fast_ticks)
     return cols
 
