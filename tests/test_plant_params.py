@@ -11,7 +11,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 YAML = os.path.join(ROOT, 'config', 'plant.yaml')
 
 
-def test_yaml_has_every_parameter_with_a_comment_and_loads():
+def test_yaml_keys_are_schema_keys_with_a_comment_and_load():
     with open(YAML) as fh:
         text = fh.read()
     keys = set(flatten(yaml.safe_load(text)['/**']['ros__parameters']))

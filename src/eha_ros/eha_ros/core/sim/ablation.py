@@ -1,0 +1,195 @@
+"""Ablation of the estimator's stages (issue 44): the campaigns with every stage on, then with
+each stage switched off in turn, on the same family and seeds; a stage earns its place when
+switching it off costs passed runs or worsens a spec's worst figure.
+
+A stage is a set of estimator.* overrides that turns it off (:data:`STAGES`); each run is a
+campaign set (core.sim.campaign_set) of the scenarios with those overrides added to each
+scenario's own, under DIR/<stage>/. The table compares each stage's summary with 'all_on'.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import yaml
+
+from ..config.cli import UsageError
+
+# stage -> the estimator.* overrides that switch it off (docs/parameters.md for each key)
+STAGES = {
+    'sensor_offset': {'estimator.model.sensor_gm': False},       # Fig. 4.6 Gauss-Markov state
+    'load_state': {'estimator.model.load_state': False},         # external-force state
+    'adapt_leakage': {'estimator.model.adapt_leakage': False},   # lambda
+    'adapt_external_leakage': {'estimator.model.adapt_external_leakage': False},   # epsilon
+    'adapt_displacement': {'estimator.model.adapt_displacement': False},   # delta
+    'adapt_compliance': {'estimator.model.adapt_compliance': False},       # kappa
+    'adapt_friction': {'estimator.model.adapt_friction': False},           # phi
+    'flow_state': {'estimator.model.flow_state': False},         # unmodelled flow v_f
+    'stribeck_friction': {'estimator.model.friction': 'eq4_36'},  # the thesis' eq. 4.36 instead
+    'noise_level': {'estimator.noise.adapt': False},             # measured sensor noise level
+    'offset_noise': {'estimator.model.offset_gate': 0.0},        # Q schedule under varying load
+    'hold_blend': {'estimator.model.hold_blend_time': 0.0},      # x_hat + b at rest under load
+    'isolate': {'estimator.fault.isolate': False},               # predict only on a sensor fault
+}
+BASE = 'all_on'
+# the issue's scenarios: what the estimator is for (tracking, load, stiffness) and its faults
+SCENARIOS = ('step', 'load_step', 'sine', 'stiffness', 'sensor_fault', 'sensor_stuck',
+             'false_alarm')
+
+
+def parse_stages(text: str | None) -> list[str]:
+    """Stage names of a comma list (None: all of :data:`STAGES`); UsageError for an unknown
+    one."""
+    if text is None:
+        return list(STAGES)
+    names = [s.strip() for s in text.split(',') if s.strip()]
+    bad = [s for s in names if s not in STAGES]
+    if bad or not names:
+        raise UsageError(f'--stages {text!r}: expected a comma list of {", ".join(STAGES)}')
+    return list(dict.fromkeys(names))
+
+
+def scenario_files(scenarios: list, stage: str, folder: str) -> list[str]:
+    """Each scenario written to ``folder`` as YAML with the stage's overrides added to its
+    own ('all_on': unchanged); a scenario that already sets a stage key is refused."""
+    from . import scenarios as SC
+    os.makedirs(folder, exist_ok=True)
+    paths = []
+    for name in scenarios:
+        scn = SC.load(name)
+        doc = {k: v for k, v in scn.as_dict().items() if k != 'duration'}
+        extra = {f'estimator:{k}': v for k, v in STAGES.get(stage, {}).items()}
+        clash = sorted(set(extra) & set(doc['overrides']))
+        if clash:
+            raise UsageError(f'scenario {scn.name} sets {", ".join(clash)} itself: stage '
+                             f'{stage} cannot switch it off')
+        doc['overrides'] = {**doc['overrides'], **extra}
+        doc['description'] = (doc['description'] + f' [ablation: {stage}]').strip()
+        path = os.path.join(folder, f'{scn.name}.yaml')
+        with open(path, 'w', encoding='utf-8') as f:
+            yaml.safe_dump(doc, f, sort_keys=False)
+        paths.append(path)
+    return paths
+
+
+def check_overrides(stages: list) -> None:
+    """Every stage's overrides load (names, types, cross-key checks) before any run starts."""
+    from ..config.params import ParamError
+    from .batch import nominal_params
+    for stage in stages:
+        try:
+            nominal_params(overrides={f'estimator:{k}': v for k, v in STAGES[stage].items()})
+        except ParamError as err:
+            raise UsageError(f'stage {stage}: {err}') from None
+
+
+def run(stages: list, scenarios: list, family: str, seeds: list, out: str, client,
+        log=print, progress: bool = True) -> dict:
+    """'all_on' and each stage off: a campaign set each under ``out``/<stage>/ (kept and
+    resumed like a set); returns the table (also ``out``/ablation.json, .md)."""
+    from .campaign_set import run_set
+    check_overrides(stages)
+    summaries = {}
+    for stage in [BASE] + list(stages):
+        d = os.path.join(out, stage)
+        off = ', '.join(f'{k}={v}' for k, v in STAGES.get(stage, {}).items())
+        log(f'ablation: {stage} ({off or "every stage on"})')
+        files = scenario_files(scenarios, stage, os.path.join(d, 'scenarios'))
+        summaries[stage] = run_set(files, family, seeds, d, client, log=log, progress=progress,
+                                   report=False)
+    from . import scenarios as SC
+    result = table(summaries, family, seeds, {n: SC.load(n).specs for n in scenarios})
+    with open(os.path.join(out, 'ablation.json'), 'w', encoding='utf-8') as f:
+        json.dump(result, f, indent=1)
+    with open(os.path.join(out, 'ablation.md'), 'w', encoding='utf-8') as f:
+        f.write('\n'.join(markdown(result)) + '\n')
+    return result
+
+
+def table(summaries: dict, family: str, seeds: list, specs: dict) -> dict:
+    """{'family', 'seeds', 'scenarios', 'stages', 'rows': {stage: {scenario: cell}}}: a cell
+    holds the passed runs summed over the seeds (and all_on's), the worst seed's count, and
+    each spec's worst figure with its relative change from all_on and whether it is worse
+    (``specs``: {scenario: its specs}, core.sim.campaign_set.summarize's figures)."""
+    from .campaign_set import _worse
+    base = summaries[BASE]['scenarios']
+    rows = {}
+    for stage, summary in summaries.items():
+        row = {}
+        for name, s in summary['scenarios'].items():
+            b = base[name]
+            cell_specs = {}
+            for metric, w in s['specs'].items():
+                bw = b['specs'].get(metric, {}).get('worst')
+                ch = _change(w['worst'], bw)
+                cell_specs[metric] = dict(
+                    worst=w['worst'], base=bw, failed=w['failed'], change=ch,
+                    worse=ch is not None and _worse(w['worst'], bw, specs[name][metric]))
+            row[name] = dict(passed=sum(v['passed'] for v in s['per_seed'].values()),
+                             runs=sum(v['runs'] for v in s['per_seed'].values()),
+                             base_passed=sum(v['passed'] for v in b['per_seed'].values()),
+                             worst_seed_passed=s['worst_passed'], specs=cell_specs)
+        rows[stage] = row
+    return dict(family=family, seeds=list(seeds), scenarios=list(base),
+                stages={k: STAGES.get(k, {}) for k in summaries}, rows=rows)
+
+
+def _change(v, base):
+    """Relative change of a worst figure from its all_on value (None when undefined)."""
+    if v is None or base is None or not (math.isfinite(v) and math.isfinite(base)) or base == 0:
+        return None
+    return v / base - 1.0
+
+
+def verdict(result: dict, stage: str, tolerance: float = 0.05) -> str:
+    """'earns' when switching ``stage`` off costs a passed run in some scenario or makes a
+    spec's worst figure worse by more than ``tolerance`` (relative: beyond noise);
+    'harmful' when off only gains passed runs; 'no effect' otherwise."""
+    cells = result['rows'][stage].values()
+    if any(c['passed'] < c['base_passed'] for c in cells) or any(
+            s['worse'] and abs(s['change']) > tolerance for c in cells
+            for s in c['specs'].values()):
+        return 'earns'
+    if any(c['passed'] > c['base_passed'] for c in cells):
+        return 'harmful'
+    return 'no effect'
+
+
+def markdown(result: dict) -> list[str]:
+    """The ablation table: per stage and scenario, passed (change from all_on)."""
+    names = result['scenarios']
+    lines = [f'# Estimator ablation: {result["family"]}, seeds '
+             f'{", ".join(str(s) for s in result["seeds"])}', '',
+             'Passed runs summed over the seeds; in brackets the change from every stage on. '
+             'Verdict (core.sim.ablation.verdict): earns = off costs a passed run or worsens a '
+             'worst figure by more than 5 %; harmful = off only gains passed runs.', '',
+             '| stage off | ' + ' | '.join(names) + ' | verdict |',
+             '| --- | ' + ' | '.join('---' for _ in names) + ' | --- |']
+    for stage, row in result['rows'].items():
+        cells = []
+        for n in names:
+            c = row[n]
+            d = c['passed'] - c['base_passed']
+            cells.append(f'{c["passed"]}/{c["runs"]}' + (f' ({d:+d})' if stage != BASE else ''))
+        v = '' if stage == BASE else verdict(result, stage)
+        lines.append(f'| {stage} | ' + ' | '.join(cells) + f' | {v} |')
+    lines += ['', '## Worst figure per spec (change from every stage on)', '']
+    for n in names:
+        lines.append(f'### {n}')
+        metrics = sorted({m for row in result['rows'].values() for m in row[n]['specs']})
+        lines.append('| stage off | ' + ' | '.join(metrics) + ' |')
+        lines.append('| --- | ' + ' | '.join('---' for _ in metrics) + ' |')
+        for stage, row in result['rows'].items():
+            cells = []
+            for m in metrics:
+                s = row[n]['specs'].get(m)
+                if s is None or s['worst'] is None:
+                    cells.append('')
+                else:
+                    ch = '' if s['change'] is None or stage == BASE else \
+                        f' ({100 * s["change"]:+.0f} %)'
+                    cells.append(f'{s["worst"]:.4g}{ch}')
+            lines.append(f'| {stage} | ' + ' | '.join(cells) + ' |')
+        lines.append('')
+    return lines

@@ -1,0 +1,86 @@
+"""scripts/ablation (core.sim.ablation): the stages' overrides load and reach the runs, the table
+judges a stage by passed runs and worst figures, and the tool runs end to end."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from eha_ros.core.config.cli import UsageError
+from eha_ros.core.sim import ablation as A
+from eha_ros.core.sim import scenarios as SC
+
+
+def test_every_stage_switches_off_an_estimator_key_that_loads():
+    A.check_overrides(list(A.STAGES))
+    for stage, over in A.STAGES.items():
+        assert over and all(k.startswith('estimator.') for k in over), stage
+
+
+def test_scenario_files_carry_the_stage_overrides(tmp_path):
+    paths = A.scenario_files(['step', 'load_step'], 'load_state', str(tmp_path))
+    for name, path in zip(['step', 'load_step'], paths):
+        scn = SC.load(path)
+        assert scn.name == name
+        assert scn.overrides['estimator:estimator.model.load_state'] is False
+        base = SC.load(name)
+        assert scn.params == base.params and scn.specs == base.specs
+        assert set(base.overrides) <= set(scn.overrides)
+    on = SC.load(A.scenario_files(['step'], A.BASE, str(tmp_path / 'on'))[0])
+    assert on.overrides == SC.load('step').overrides
+
+
+def test_a_scenario_that_sets_the_stage_key_itself_is_refused(tmp_path):
+    doc = {k: v for k, v in SC.load('step').as_dict().items() if k != 'duration'}
+    doc['overrides'] = {'estimator:estimator.model.load_state': True}
+    path = tmp_path / 'mine.yaml'
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(UsageError, match='load_state'):
+        A.scenario_files([str(path)], 'load_state', str(tmp_path / 'out'))
+
+
+def test_unknown_stage_is_one_line():
+    with pytest.raises(UsageError, match="--stages 'nope'"):
+        A.parse_stages('nope')
+    assert A.parse_stages(None) == list(A.STAGES)
+    assert A.parse_stages('isolate, load_state,isolate') == ['isolate', 'load_state']
+
+
+def _summary(passed: int, worst: float) -> dict:
+    return {'scenarios': {'step': {
+        'per_seed': {'1': {'runs': 10, 'passed': passed}}, 'worst_passed': passed,
+        'specs': {'overshoot_pct': {'worst': worst, 'failed': 10 - passed}}}}}
+
+
+@pytest.mark.parametrize('passed,worst,expected', [
+    (9, 3.0, 'earns'),            # a run lost
+    (10, 3.3, 'earns'),           # the worst overshoot 10 % worse (a maximum: larger is worse)
+    (10, 3.1, 'no effect'),       # 3 %: within noise
+    (10, 2.0, 'no effect'),       # better figure, same passes
+    (11, 3.0, 'harmful'),         # off gains a run
+])
+def test_verdict(passed, worst, expected):
+    summaries = {A.BASE: _summary(10, 3.0), 'load_state': _summary(passed, worst)}
+    result = A.table(summaries, 'thesis', [1], {'step': SC.load('step').specs})
+    assert A.verdict(result, 'load_state') == expected
+    text = '\n'.join(A.markdown(result))
+    assert f'| load_state | {passed}/10 ({passed - 10:+d}) | {expected} |' in text
+
+
+def test_ablation_runs_end_to_end(tmp_path):
+    out = tmp_path / 'abl'
+    p = subprocess.run([sys.executable, '-m', 'eha_ros.tools.ablation', 'step', '--stages',
+                        'load_state', '--family', 'random:2', '--seeds', '3', '--workers', '1',
+                        '--out', str(out), '--quiet'], capture_output=True, text=True,
+                       timeout=500)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert '  load_state: ' in p.stdout
+    result = json.loads((out / 'ablation.json').read_text())
+    assert list(result['rows']) == [A.BASE, 'load_state'] and result['seeds'] == [3]
+    cell = result['rows']['load_state']['step']
+    assert cell['runs'] == 2 and cell['base_passed'] == result['rows'][A.BASE]['step']['passed']
+    info = json.loads((out / 'load_state' / 'step-seed3' / 'campaign.json').read_text())
+    assert info['scenario']['overrides']['estimator:estimator.model.load_state'] is False
+    assert os.path.isfile(out / 'ablation.md')
