@@ -75,11 +75,7 @@ def main(argv=None) -> int:
             result = A.run(stages, scenarios, args.family, seeds, out, client, log=log,
                            progress=not args.quiet)
         finally:
-            if cluster is not None:
-                C.quiet_shutdown(client)
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            C.disconnect(client, cluster)
         for stage in result['rows']:
             if stage != A.BASE:
                 cells = ', '.join(f'{n} {c["passed"] - c["base_passed"]:+d}'

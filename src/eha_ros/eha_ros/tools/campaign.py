@@ -140,11 +140,7 @@ def run_set(args) -> int:
                              progress=not args.quiet, report=not args.no_report,
                              plant_params=args.plant_params)
     finally:
-        if cluster is not None:
-            C.quiet_shutdown(client)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        C.disconnect(client, cluster)
     roles = ', '.join(sorted(set(summary['roles'].values())))
     print(f'campaign set {args.family}, seeds {args.seeds or seeds[0]} ({roles}): '
           f'{summary["wall_s"]:.0f} s')

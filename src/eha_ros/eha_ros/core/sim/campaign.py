@@ -226,6 +226,16 @@ def quiet_shutdown(client) -> None:
         pass
 
 
+def disconnect(client, cluster) -> None:
+    """Close what :func:`connect` opened: the client, and a LocalCluster of our own quietly
+    (:func:`quiet_shutdown`)."""
+    if cluster is not None:
+        quiet_shutdown(client)
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
 def chunks(ids: list, n_workers: int, size: int | None = None) -> list:
     """Split run ids into chunks, largest first (guided scheduling): each about a quarter of
     the remaining runs per worker, at most 8 (a lost worker costs little) and down to 1 at
@@ -483,11 +493,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         return CampaignResult(out, info, df)
     finally:
         if own:
-            if cluster is not None:
-                quiet_shutdown(client)
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            disconnect(client, cluster)
 
 
 def _resume_inputs(out: str, scenario: str | None):
