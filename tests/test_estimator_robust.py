@@ -62,10 +62,10 @@ def test_adaptive_predict_is_the_ekf_with_the_leakage_jacobian(params):
     """Mean: F (with the parameter columns) x + G u; covariance: Fj P Fj' + Q with
     Fj = F + lambda D (the Jacobian of the leakage flow lambda C p in p)."""
     kf = Estimator(params).kf
-    assert isinstance(kf, ChamberKF) and min(kf.i_lam, kf.i_del, kf.i_kap) > 0
+    assert isinstance(kf, ChamberKF) and min(kf.i_leakage, kf.i_displacement, kf.i_compliance) > 0
     rng = np.random.default_rng(1)
     kf.x[2:4] = kf.c.p_acc + np.array([20e5, -0.3e5])
-    kf.x[kf.i_lam], kf.x[kf.i_del], kf.x[kf.i_kap] = 4.0, -0.1, 0.2
+    kf.x[kf.i_leakage], kf.x[kf.i_displacement], kf.x[kf.i_compliance] = 4.0, -0.1, 0.2
     A = rng.normal(size=(kf.n, kf.n)) * np.sqrt(np.diag(kf.P))
     kf.P = A @ A.T / kf.n + np.diag(np.diag(kf.P))
     x0, P0 = kf.x.copy(), kf.P.copy()
@@ -77,19 +77,20 @@ def test_adaptive_predict_is_the_ekf_with_the_leakage_jacobian(params):
     assert np.allclose(kf.x, F @ x0 + G @ kf.u, rtol=1e-12, atol=1e-12)
     assert np.allclose(kf.P, Fj @ P0 @ Fj.T + kf.Q, rtol=1e-10, atol=1e-14)
     # the leakage column is the flow lambda C (p - ...) through the ZOH of a unit flow
-    assert np.any(F[:nl, kf.i_lam] != 0.0) and np.any(F[:nl, kf.i_del] != 0.0)
+    assert np.any(F[:nl, kf.i_leakage] != 0.0) and np.any(F[:nl, kf.i_displacement] != 0.0)
 
 
 def test_projection_bounds_and_offset_band(params):
     kf = Estimator(params).kf
-    kf.x[kf.i_lam], kf.x[kf.i_del], kf.x[kf.i_kap], kf.x[kf.i_gm] = 99.0, -9.0, 0.1, -1e-3
+    i_lam, i_del = kf.i_leakage, kf.i_displacement
+    kf.x[i_lam], kf.x[i_del], kf.x[kf.i_compliance], kf.x[kf.i_gm] = 99.0, -9.0, 0.1, -1e-3
     assert kf.project() == 0          # a clip: the projection at work, no verdict yet
-    assert kf.x[kf.i_lam] == kf.lam_range[1] and kf.x[kf.i_del] == kf.del_range[0]
-    assert kf.x[kf.i_kap] == 0.1 and kf.x[kf.i_gm] == -kf.offset_bound
+    assert kf.x[i_lam] == kf.leakage_range[1] and kf.x[i_del] == kf.displacement_range[0]
+    assert kf.x[kf.i_compliance] == 0.1 and kf.x[kf.i_gm] == -kf.offset_bound
     for _ in range(adapt.EDGE_TICKS - 2):
-        kf.x[kf.i_lam] = 99.0
+        kf.x[kf.i_leakage] = 99.0
         assert kf.project() == 0
-    kf.x[kf.i_lam] = 99.0
+    kf.x[kf.i_leakage] = 99.0
     assert kf.project() == 1          # held on its bound: the model is at its edge
 
 
@@ -330,8 +331,8 @@ def test_estimate_stays_near_the_sensor_beyond_the_adaptation_range():
           f'edge {kf.edge}, verdict {adapt.VERDICTS[s.estimator.consistency]}')
     assert np.abs(xm - xh)[late].max() < 0.45e-3
     assert np.abs(x[t > 2.0]).max() < 0.6e-3
-    assert (kf.edge or kf.leakage_correction > kf.lam_range[1] - 1.5 or   # a leakage path
-            kf.external_leakage_correction > kf.eps_range[1] - 1.5)      # at (near) its edge
+    assert (kf.edge or kf.leakage_correction > kf.leakage_range[1] - 1.5 or   # a leakage path
+            kf.external_leakage_correction > kf.external_leakage_range[1] - 1.5)  # near its edge
     assert s.estimator.consistency in (adapt.MODEL, adapt.DISAGREE)
 
 

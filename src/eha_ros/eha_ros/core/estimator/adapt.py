@@ -205,14 +205,14 @@ def predict_jacobian(x, P, F, Fj, Dm, row0, col0, col1, n_lin, lam, eps, G, u, Q
 
 
 @njit(cache=True)
-def maneuver(Q, i_load, pz, threshold, q_low, q_high) -> None:
+def maneuver(Q, i_load, pz, load_jump_z, q_load, q_load_jump) -> None:
     """Adjustable-level process noise of the external-force state (Bar-Shalom, Li,
     Kirubarajan 2001, sec. 11.2, maneuver detection): after a sample whose pressure
-    innovation exceeds ``threshold`` (normalised) the next predict uses q_high, else q_low.
-    A load step is a force the random walk of q_low would take seconds to learn; meanwhile the
+    innovation exceeds ``load_jump_z`` (normalised) the next predict uses q_load_jump, else q_load.
+    A load step is a force the random walk of q_load would take seconds to learn; meanwhile the
     oil's compression (0.4 mm for 10 kN) would be taken for sensor offset and parameters."""
     if i_load >= 0:
-        Q[i_load, i_load] = q_high if pz > threshold else q_low
+        Q[i_load, i_load] = q_load_jump if pz > load_jump_z else q_load
 
 
 @njit(cache=True)
@@ -323,14 +323,14 @@ def monitor(mk, ms, z, x_hat, sensor_code, drift, edge) -> int:
 
 
 @njit(cache=True)
-def offset_noise(x, i_gm, b_sigma, of, alpha, alpha_m, alpha_v, gate, dp_load) -> bool:
+def offset_noise(x, i_gm, b_sigma, of, alpha, alpha_m, alpha_v, offset_gate, dp_load) -> bool:
     """Is the sensor-offset estimate b a model error under load? (covariance matching of a
     state correction against its own model, Mehra 1972, "Approaches to adaptive filtering",
     IEEE TAC 17(5); Bar-Shalom, Li, Kirubarajan 2001, sec. 5.4 consistency.)
 
     b is the sensor's Gauss-Markov offset, stationary with sigma b_sigma (the datasheet's at the
     measured noise level): its mean square over 1/alpha updates stays near b_sigma^2. Above
-    gate^2 b_sigma^2 (2 sigma rms: b spends most of the time beyond what the sensor wanders)
+    offset_gate^2 b_sigma^2 (2 sigma rms: b spends most of the time beyond what the sensor wanders)
     while the pressure difference varies by more than dp_load rms (its deviation from a mean
     over 1/alpha_m updates, squared and averaged over 1/alpha_v: a varying load beyond what
     friction holds, with leakage and compressibility flows the model gets wrong, reversing
@@ -347,12 +347,12 @@ def offset_noise(x, i_gm, b_sigma, of, alpha, alpha_m, alpha_v, gate, dp_load) -
     dp = x[2] - x[3]
     of[OF_DPM] += alpha_m * (dp - of[OF_DPM])
     of[OF_DPV] += alpha_v * ((dp - of[OF_DPM]) ** 2 - of[OF_DPV])
-    if i_gm < 0 or gate <= 0.0:
+    if i_gm < 0 or offset_gate <= 0.0:
         of[OF_OPEN] = 0.0
         return False
     r = x[i_gm] / b_sigma
     of[OF_B2] += alpha * (r * r - of[OF_B2])
-    is_open = of[OF_B2] > gate * gate and load_varying(of, dp_load)
+    is_open = of[OF_B2] > offset_gate * offset_gate and load_varying(of, dp_load)
     of[OF_OPEN] = 1.0 if is_open else 0.0
     return is_open
 
@@ -366,71 +366,73 @@ def load_varying(of, dp_load) -> bool:
 
 
 @njit(cache=True)
-def disagree_noise(Q, x, i_gm, b_dis, mk, ms, edge, q_low, q_high, varying,
-                   q_varying) -> None:
+def disagree_noise(Q, x, i_gm, position_gm_sigma, mk, ms, edge, q_x, q_x_disagree, varying,
+                   q_x_offset) -> None:
     """While the disagreement condition holds (|low-passed z - x_hat| above the band for MK_N
     samples), while the DISAGREE verdict stays reported (its hold) and while an adaptive state
     sits on its bound (edge > 0: the model is beyond what it can adapt to), the position's
-    process noise is q_high instead of q_low: the filter's dead reckoning is proven wrong, so
+    process noise is q_x_disagree instead of q_x: the filter's dead reckoning is proven wrong, so
     its position variance opens and the gain pulls the estimate to the measurement
     (adjustable-level process noise, Bar-Shalom et al. 2001 sec. 11.2). Meanwhile the sensor
-    offset estimate b is held within +-b_dis (its own sigma): a persistent disagreement is not
-    a Gauss-Markov wander of the sensor, and with the position free b would otherwise keep it
-    (it is pushed by every innovation, K_b e per tick, and decays only at 2 pi f_c). Under a
-    varying load (:func:`load_varying`) it is q_varying, between the two: the leakage and
+    offset estimate b is held within +-position_gm_sigma (its own sigma): a persistent
+    disagreement is not a Gauss-Markov wander of the sensor, and with the position free b
+    would otherwise keep it (it is pushed by every innovation, K_b e per tick, and decays
+    only at 2 pi f_c). Under a
+    varying load (:func:`load_varying`) it is q_x_offset, between the two: the leakage and
     compressibility flows the adaptive states get wrong integrate into a position error at
     low frequency, where b (the sensor's 1 Hz wander) would take it as offset; the estimate
     follows the sensor there instead. Measured on Table 4.5's C_eq x10 plants under the
     stiffness scenario (issue 42's bound, tuning seeds 1-2): 65 of 108 runs meet it with b
-    taking the error (q_varying = q_low), 107 with 3e-10 m^2 per tick. 1e-9 gave 106 and
+    taking the error (q_x_offset = q_x), 107 with 3e-10 m^2 per tick. 1e-9 gave 106 and
     followed a 1.6 mm sensor jump within 3 samples under a varying load, too fast for the jump
     detector's debounce (tests/test_batch_fast.py's drift that ends in a jump)."""
     if ms[MS_N] >= mk[MK_N] or ms[MS_VERDICT] == DISAGREE or edge > 0:
-        Q[0, 0] = q_high
+        Q[0, 0] = q_x_disagree
         if i_gm >= 0:
-            x[i_gm] = clip(x[i_gm], -b_dis, b_dis)
+            x[i_gm] = clip(x[i_gm], -position_gm_sigma, position_gm_sigma)
     elif varying:
-        Q[0, 0] = q_varying
+        Q[0, 0] = q_x_offset
     else:
-        Q[0, 0] = q_low
+        Q[0, 0] = q_x
 
 
 @njit(cache=True)
-def flow_noise(Q, x, i_flow, i_gm, b_sigma, k, q_open, rest, count, n_open, fk, dp_fric,
-               share, v_report) -> bool:
+def flow_noise(Q, x, i_flow, i_gm, b_sigma, flow_gate, q_flow, rest, count, flow_ticks, fk,
+               dp_friction, flow_share, flow_report) -> bool:
     """Unmodelled flow v_f (velocity units: A_p v_f into chamber A, out of B; issue 15): a
     persistent velocity bias of the flow model, which the adaptive states cannot separate at
-    one operating point, is not a sensor offset. Its random walk opens (q_open, else closed)
+    one operating point, is not a sensor offset. Its random walk opens (q_flow, else closed)
     while the piston rests (``rest``; the callers also require the load not to vary,
-    :func:`load_varying`) and the sensor-offset estimate b has sat beyond k of its own
-    stationary sigma (b_sigma: the Gauss-Markov sigma at the measured noise level) for n_open
-    updates in a row with the pressure difference within dp_fric of its value at the run's
-    start (count: FL_N that run, FL_DP that value, FL_ACTIVE the result; a held load, not a
-    sinusoidal one, whose
-    reversing flows a walk would only chase), and it is projected onto
+    :func:`load_varying`) and the sensor-offset estimate b has sat beyond flow_gate times its
+    own stationary sigma (b_sigma: the Gauss-Markov sigma at the measured noise level) for
+    flow_ticks updates in a row with the pressure difference within dp_friction of its value
+    at the run's start (count: FL_N that run, FL_DP that value, FL_ACTIVE the result; a held
+    load, not a sinusoidal one, whose reversing flows a walk would only chase), and it is
+    projected onto
 
-        |v_f| <= share (C_x + C_r) max(0, |p_A - p_B| - dp_fric) / A_p
+        |v_f| <= flow_share (C_x + C_r) max(0, |p_A - p_B| - dp_friction) / A_p
 
     the leakage flow of the pressure difference beyond what the largest friction of the
-    family can hold (dp_fric): a leak needs a load. Without one the bound is zero and the walk
-    stays closed, so a sensor drift while holding without load is not absorbed as flow and
-    ends in DISAGREE as before; under load a drift slower than the bound cannot be told from
-    a leak with one position sensor. So a flow is never absorbed silently: True (the
-    monitor's MODEL verdict, model_mismatch) while |v_f| > v_report."""
+    family can hold (dp_friction): a leak needs a load. Without one the bound is zero and the
+    walk stays closed, so a sensor drift while holding without load is not absorbed as flow
+    and ends in DISAGREE as before; under load a drift slower than the bound cannot be told
+    from a leak with one position sensor. So a flow is never absorbed silently: True (the
+    monitor's MODEL verdict, model_mismatch) while |v_f| > flow_report. The arguments are
+    named as the estimator.model.* parameters they come from."""
     if i_flow < 0 or i_gm < 0:
         return False
     dp = x[2] - x[3]
-    if rest and abs(x[i_gm]) > k * b_sigma and (count[FL_N] == 0.0 or
-                                                abs(dp - count[FL_DP]) <= dp_fric):
+    if rest and abs(x[i_gm]) > flow_gate * b_sigma and (
+            count[FL_N] == 0.0 or abs(dp - count[FL_DP]) <= dp_friction):
         if count[FL_N] == 0.0:
             count[FL_DP] = dp
         count[FL_N] += 1.0
     else:
         count[FL_N] = 0.0
-    v_max = share * (fk[FK_CX] + fk[FK_CR]) * max(0.0, abs(dp) - dp_fric) / fk[FK_AP]
-    Q[i_flow, i_flow] = q_open if count[FL_N] >= n_open and v_max > 0.0 else 0.0
+    v_max = flow_share * (fk[FK_CX] + fk[FK_CR]) * max(0.0, abs(dp) - dp_friction) / fk[FK_AP]
+    Q[i_flow, i_flow] = q_flow if count[FL_N] >= flow_ticks and v_max > 0.0 else 0.0
     x[i_flow] = clip(x[i_flow], -v_max, v_max)
-    active = abs(x[i_flow]) > v_report
+    active = abs(x[i_flow]) > flow_report
     count[FL_ACTIVE] = 1.0 if active else 0.0
     return active
 

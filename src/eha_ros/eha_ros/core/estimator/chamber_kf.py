@@ -100,16 +100,20 @@ class ChamberKF(MeasuredKF):
             self.i_flow = len(q)
             q.append(0.0)
             p0.append(0.0)
-        self.i_lam = self.i_del = self.i_kap = self.i_phi = self.i_eps = -1
-        self.lam_range = self.del_range = self.kap_range = self.phi_range = (0.0, 0.0)
-        self.eps_range = (0.0, 0.0)
+        # the adaptive states' indexes in x (-1: not a state) and ranges, named as their
+        # estimator.model.* parameters
+        self.i_leakage = self.i_displacement = self.i_compliance = -1
+        self.i_friction = self.i_external_leakage = -1
+        self.leakage_range = self.displacement_range = self.compliance_range = (0.0, 0.0)
+        self.friction_range = self.external_leakage_range = (0.0, 0.0)
         self.c_Ts = c.V_d / (c.beta * Ts)
         if friction is None:
             friction_scale = None                  # phi scales the Stribeck curve only
         if leakage is None:
             external = None                        # epsilon splits lambda's paths
-        for name, spec in (('lam', leakage), ('del', displacement), ('kap', compliance),
-                           ('phi', friction_scale), ('eps', external)):
+        for name, spec in (('leakage', leakage), ('displacement', displacement),
+                           ('compliance', compliance), ('friction', friction_scale),
+                           ('external_leakage', external)):
             if spec is not None:
                 setattr(self, 'i_' + name, len(q))
                 setattr(self, name + '_range', (float(spec[2]), float(spec[3])))
@@ -120,12 +124,12 @@ class ChamberKF(MeasuredKF):
         self.i_gm = 4 if gm is not None else -1
         self.offset_bound = float(offset_bound)
         self.edge = 0                               # adaptive states on a bound (last update)
-        params = [i for i in (self.i_lam, self.i_del, self.i_kap, self.i_phi, self.i_eps)
-                  if i >= 0]
+        params = [i for i in (self.i_leakage, self.i_displacement, self.i_compliance,
+                              self.i_friction, self.i_external_leakage) if i >= 0]
         self.i_frozen = min(params) if params else n     # the adaptive states are the last
         self.adapt_gate = float(adapt_gate)
-        self.alpha_dp = float(compliance_alpha)     # low-pass of the compliance flow's input
-        self.p_excite = float(leakage_excitation)
+        self.alpha_compliance = float(compliance_alpha)   # low-pass of the compliance flow's input
+        self.leakage_excitation = float(leakage_excitation)
         # (F, G) per check-valve state, index 2 s_a + s_b
         self.modes = []
         L = []                                      # ZOH columns of a unit flow into A, B
@@ -147,7 +151,7 @@ class ChamberKF(MeasuredKF):
                     F[:n_lin, self.i_flow] = c.A_p * (Lq[:n_lin, 0] - Lq[:n_lin, 1])
                 self.modes.append((F, G))
                 L.append(Lq)
-                split = self.i_eps >= 0
+                split = self.i_external_leakage >= 0
                 D.append(leak_sensitivity(c, A, Ts, n, 'x' if split else 'xr'))
                 De.append(leak_sensitivity(c, A, Ts, n, 'r') if split else np.zeros((n, n)))
         self.Lm = np.vstack(L)                      # (4 n, 2), rows of mode m at m n
@@ -166,14 +170,14 @@ class ChamberKF(MeasuredKF):
             fk[adapt.FK_CX], fk[adapt.FK_CR], fk[adapt.FK_PACC] = c.C_x, c.C_r, c.p_acc
             (fk[adapt.FK_FC], fk[adapt.FK_FS], fk[adapt.FK_VS], fk[adapt.FK_ALPHA],
              fk[adapt.FK_VREST], fk[adapt.FK_NREST], fk[adapt.FK_QREST]) = friction
-            fk[adapt.FK_ILAM], fk[adapt.FK_IDEL], fk[adapt.FK_IPHI] = (self.i_lam, self.i_del,
-                                                                       self.i_phi)
-            fk[adapt.FK_IEPS] = self.i_eps
+            fk[adapt.FK_ILAM], fk[adapt.FK_IDEL] = self.i_leakage, self.i_displacement
+            fk[adapt.FK_IPHI] = self.i_friction
+            fk[adapt.FK_IEPS] = self.i_external_leakage
             self.fk = fk
         # the largest pressure difference friction alone can hold (adapt.flow_noise): the
         # static friction at the top of the friction state's range
         F_top = friction[1] if friction is not None else F_s
-        self.dp_friction = F_top * (1.0 + self.phi_range[1]) / c.A_p
+        self.dp_friction = F_top * (1.0 + self.friction_range[1]) / c.A_p
         self.reset()
 
     def reset(self, position: float = 0.0, p_a: float | None = None,
@@ -211,40 +215,42 @@ class ChamberKF(MeasuredKF):
         return out
 
     def unexcited(self) -> int:
-        return adapt.leakage_unexcited(self.x, self.i_lam, self.p_excite)
+        return adapt.leakage_unexcited(self.x, self.i_leakage, self.leakage_excitation)
 
     def project(self) -> int:
-        self.edge = adapt.project(self.x, self.i_lam, *self.lam_range, self.i_del,
-                                  *self.del_range, self.i_kap, *self.kap_range, self.i_phi,
-                                  *self.phi_range, self.i_eps, *self.eps_range, self.i_gm,
-                                  self.offset_bound, self.clipped, adapt.EDGE_TICKS)
+        self.edge = adapt.project(self.x, self.i_leakage, *self.leakage_range,
+                                  self.i_displacement, *self.displacement_range,
+                                  self.i_compliance, *self.compliance_range, self.i_friction,
+                                  *self.friction_range, self.i_external_leakage,
+                                  *self.external_leakage_range, self.i_gm, self.offset_bound,
+                                  self.clipped, adapt.EDGE_TICKS)
         return self.edge
 
     @property
     def external_leakage_correction(self) -> float:
         """Estimated relative correction epsilon of the per-port leakage C_r (0 without)."""
-        return float(self.x[self.i_eps]) if self.i_eps >= 0 else 0.0
+        return float(self.x[self.i_external_leakage]) if self.i_external_leakage >= 0 else 0.0
 
     @property
     def friction_correction(self) -> float:
         """Estimated relative friction correction phi (plant friction / nominal - 1)."""
-        return float(self.x[self.i_phi]) if self.i_phi >= 0 else 0.0
+        return float(self.x[self.i_friction]) if self.i_friction >= 0 else 0.0
 
     @property
     def leakage_correction(self) -> float:
         """Estimated relative leakage correction lambda (plant leakage / nominal - 1; of C_x
         only when epsilon is a state)."""
-        return float(self.x[self.i_lam]) if self.i_lam >= 0 else 0.0
+        return float(self.x[self.i_leakage]) if self.i_leakage >= 0 else 0.0
 
     @property
     def compliance_correction(self) -> float:
         """Estimated relative compliance correction kappa (beta nominal / beta - 1)."""
-        return float(self.x[self.i_kap]) if self.i_kap >= 0 else 0.0
+        return float(self.x[self.i_compliance]) if self.i_compliance >= 0 else 0.0
 
     @property
     def displacement_correction(self) -> float:
         """Estimated relative displacement correction delta (D_p / nominal - 1)."""
-        return float(self.x[self.i_del]) if self.i_del >= 0 else 0.0
+        return float(self.x[self.i_displacement]) if self.i_displacement >= 0 else 0.0
 
     def pressure_z(self, p_a: float, p_b: float) -> tuple:
         return (p_a, p_b)

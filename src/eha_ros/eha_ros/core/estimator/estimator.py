@@ -115,12 +115,12 @@ class Estimator:
         self.is_model = self.chambers or isinstance(self.kf, ModelKF)
         self.use_pressure = self.is_model and self.kf.with_pressure
         self.x_max = 0.5 * pp.stroke + params[e + 'validity.position_margin']
-        self.p_min = params[e + 'validity.pressure_min']
-        self.p_max = params[e + 'validity.pressure_max']
-        self.w_max = params[e + 'validity.max_abs_motor_speed']
+        self.pressure_min = params[e + 'validity.pressure_min']
+        self.pressure_max = params[e + 'validity.pressure_max']
+        self.max_abs_motor_speed = params[e + 'validity.max_abs_motor_speed']
         self.isolate = params[e + 'fault.isolate']
-        self.alpha_pd = adapt.lowpass_alpha(params[e + 'model.pressure_lowpass'], self.Ts)
-        self.alpha_wf = adapt.lowpass_alpha(params[e + 'model.friction_lowpass'], self.Ts)
+        self.alpha_pressure = adapt.lowpass_alpha(params[e + 'model.pressure_lowpass'], self.Ts)
+        self.alpha_friction = adapt.lowpass_alpha(params[e + 'model.friction_lowpass'], self.Ts)
         self.detector = fd.FaultDetector.from_params(params, self.Ts)
         mk = np.zeros(adapt.NMK)                   # consistency monitor (adapt.monitor)
         mk[adapt.MK_ALPHA] = adapt.lowpass_alpha(params[e + 'monitor.lowpass'], self.Ts)
@@ -133,9 +133,9 @@ class Estimator:
         self.q_load, self.q_load_jump = params[m + 'q_load'], params[m + 'q_load_jump']
         self.load_jump_z = params[m + 'load_jump_z']
         self.q_x, self.q_x_disagree = params[m + 'q'][0], params[m + 'q_x_disagree']
-        self.b_dis = params[e + 'noise.position_gm_sigma']
-        self.q_flow, self.flow_k = params[m + 'q_flow'], params[m + 'flow_gate']
-        self.flow_n = round(params[m + 'flow_time'] / self.Ts)
+        self.position_gm_sigma = params[e + 'noise.position_gm_sigma']
+        self.q_flow, self.flow_gate = params[m + 'q_flow'], params[m + 'flow_gate']
+        self.flow_ticks = round(params[m + 'flow_time'] / self.Ts)
         self.flow_share, self.flow_report = params[m + 'flow_share'], params[m + 'flow_report']
         self.flow_s = np.zeros(adapt.NFLOW)       # adapt.flow_noise's state
         self.offset_gate, self.q_x_offset = params[m + 'offset_gate'], params[m + 'q_x_offset']
@@ -155,18 +155,15 @@ class Estimator:
         self.counters = Counters()
         self.max_gap_ticks = 1000       # a longer gap is predicted over at most 1 s
         # the compiled tick's constants, state and arrays (core.estimator.stepper): the state
-        # arrays above become views into its state vector, the scalars are read from it
+        # arrays above become views into its state record, the scalars are read from it
         self.kernel = stepper.pack(self)
-        k, e, _ = self.kernel
-        self.detector.s = e[stepper.E_FD:stepper.E_FD + fd.NFS]
-        self.monitor_s = e[stepper.E_MON:stepper.E_MON + adapt.NMS]
-        self.noise_s = e[stepper.E_NL:stepper.E_NL + noise_level.NNS]
-        self.flow_s = e[stepper.E_FLOWN:stepper.E_FLOWN + adapt.NFLOW]
-        self.offset_s = e[stepper.E_OFFS:stepper.E_OFFS + adapt.NOFS]
+        self.E = E = self.kernel[1]
+        self.i_gm = int(self.kernel[0]['i_gm'][0])
+        self.detector.s, self.monitor_s = E['detector'][0], E['monitor'][0]
+        self.noise_s, self.flow_s, self.offset_s = E['noise'][0], E['flow'][0], E['offset'][0]
         if self.chambers:
-            self.kf.p_last = e[stepper.E_PLAST:stepper.E_PLAST + 4]
-            self.kf.clipped = e[stepper.E_CLIPPED:stepper.E_CLIPPED + 1]
-            self.kf.fs = e[stepper.E_FS:stepper.E_FS + adapt.NFS]
+            self.kf.p_last, self.kf.clipped = E['p_last'][0], E['clipped'][0]
+            self.kf.fs = E['friction'][0]
         # the kernels' compiled functions for these arrays, called per tick (the record is
         # not typed again on every call: kernel_records.entry_point)
         kn = self.kernel
@@ -193,26 +190,25 @@ class Estimator:
             kf.Q[kf.i_gm, kf.i_gm] if with_gm else 0.0, kf.i_gm,
             p[e + 'adapt_quiet_velocity'] * pp.A_p / pp.D_p)
 
-    def _scalar(i, doc):
-        return property(lambda self: float(self.kernel[1][i]),
-                        lambda self, v: self.kernel[1].__setitem__(i, v), doc=doc)
+    def _scalar(name):
+        return property(lambda self: float(self.E[name][0]),
+                        lambda self, v: self.E.__setitem__(name, v),
+                        doc=f"stepper.STATE's {name}")
 
-    omega_prev = _scalar(stepper.E_OMEGA, 'the motor speed of the previous sample (rad/s)')
-    w_fric = _scalar(stepper.E_WFRIC, 'low-passed pump speed: the friction sign of eq. 4.36')
-    pd_meas = _scalar(stepper.E_PD_MEAS, 'last good measured p_D (Pa)')
-    pd_filt = _scalar(stepper.E_PD_FILT, 'its low-pass, the model input (Pa)')
+    omega_prev = _scalar('omega')
+    w_fric, pd_meas, pd_filt = _scalar('w_fric'), _scalar('pd_meas'), _scalar('pd_filt')
     del _scalar
 
     @property
     def updates(self) -> int:
         """Measurement updates so far."""
-        return int(self.kernel[1][stepper.E_UPDATES])
+        return int(self.E['updates'][0])
 
     def reset(self):
         self.started = False
         self._saved = None
         self.omega_prev = self.w_fric = self.pd_meas = self.pd_filt = 0.0
-        self.kernel[1][stepper.E_UPDATES] = self.kernel[1][stepper.E_HOLDW] = 0.0
+        self.E['updates'] = self.E['hold_weight'] = 0.0
         self.detector.reset()
         self.monitor_s[:] = 0.0
         self.flow_s[:] = 0.0
@@ -225,7 +221,8 @@ class Estimator:
         return isinstance(x, (int, float)) and math.isfinite(x) and abs(x) <= self.x_max
 
     def _pressure_ok(self, pa, pb) -> bool:
-        return all(math.isfinite(v) and self.p_min <= v <= self.p_max for v in (pa, pb))
+        lo, hi = self.pressure_min, self.pressure_max
+        return all(math.isfinite(v) and lo <= v <= hi for v in (pa, pb))
 
     def _speed(self, motor_speed, active_channel):
         """Active channel's speed if valid, else the last good one (counted)."""
@@ -234,7 +231,7 @@ class Estimator:
             self.counters.bump('rejected_channel')
             return self.omega_prev, 'channel'
         w = float(motor_speed[ch])
-        if not (math.isfinite(w) and abs(w) <= self.w_max):
+        if not (math.isfinite(w) and abs(w) <= self.max_abs_motor_speed):
             self.counters.bump('rejected_motor_speed')
             return self.omega_prev, 'motor_speed'
         return w, ''
@@ -368,8 +365,7 @@ class Estimator:
     def _result(self, innovation, nis, skipped, rejected, m) -> EstimateResult:
         kf = self.kf
         pd = kf.pressure_diff if self.is_model else self.pd_meas
-        return EstimateResult(stepper.published(self.kernel[1], kf.x,
-                                                int(self.kernel[0][stepper.K_IGM])),
+        return EstimateResult(stepper.published(self.E, kf.x, self.i_gm),
                               kf.velocity, pd, kf.position_variance, innovation,
                               nis, skipped, self.detector.code, rejected, m, self.consistency,
                               self.omega_prev if self.started else math.nan)

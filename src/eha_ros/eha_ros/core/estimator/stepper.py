@@ -4,9 +4,10 @@ kernels (core.sim.closed_loop) for many ticks at once.
 
 Python keeps the events: validity checks with their counters and reasons, the first sample,
 a sensor isolated as faulty, undoing provisional (stale) predictions, the Chinniah pair.
-Scalars live in a state vector (E_*) and the constants in K_*; the other arrays are the
-filter's own, named in one record (:class:`Arrays`), and the Estimator's state arrays are views
-into E (nothing is copied per tick).
+The constants and the state are named records (:data:`CONSTANTS`, :data:`STATE`: fields named
+as the parameters they come from), the other arrays are the filter's own, named in one
+record (:class:`Arrays`), and the Estimator's state arrays are views into E (nothing is copied
+per tick).
 Order: p_D measured, predict (eq. 4.1-4.2 with eq. 4.36), p_D low-pass, Joseph update
 (eq. 4.4-4.6), the adaptive parts, fault detector, consistency monitor.
 """
@@ -28,40 +29,63 @@ from .friction import friction_estimate
 
 drop_stale(__file__)
 
-# constants
-(K_XMAX, K_PMIN, K_PMAX, K_WMAX, K_ALPHA_PD, K_MODEL, K_USE_P, K_FRIC_P, K_ILEAK, K_NLIN,
- K_AP, K_DP, K_FS, K_VEPS, K_ISOLATE, K_CHAMBERS, K_PC, K_ALPHA_WF,
- K_CX, K_CR, K_PACC, K_ILAM, K_IDEL, K_LAMLO, K_LAMHI, K_DELLO, K_DELHI, K_IGM, K_BMAX,
- K_IKAP, K_KAPLO, K_KAPHI, K_CTS, K_IFROZEN, K_GATE,
- K_ILOAD, K_QLOAD, K_QLOADJ, K_LOADZ, K_ALPHA_DP, K_QX, K_QXD, K_BDIS, K_PEXC) = range(44)
-K_MON = 44             # adapt.NMK entries: the consistency monitor's constants
-(K_STRIBECK, K_IPHI, K_PHILO, K_PHIHI, K_IEPS, K_EPSLO, K_EPSHI, K_IMOVED,
- K_MOVEDZ) = range(K_MON + adapt.NMK, K_MON + adapt.NMK + 9)
-K_FK = K_MOVEDZ + 1    # adapt.NFK entries: the friction model's constants
-K_NADAPT = K_FK + adapt.NFK     # 1: the sensors' noise level is measured (noise_level)
-K_NL = K_NADAPT + 1    # noise_level.NNK entries: its constants
-K_IFLOW = K_NL + noise_level.NNK
-K_QFLOW, K_FLOWK, K_FLOWN, K_FLOWDP, K_FLOWSH, K_FLOWREP = (K_IFLOW + i for i in range(1, 7))
-K_OFFG, K_QXO = K_FLOWREP + 1, K_FLOWREP + 2     # adapt.offset_noise: gate, position noise
-K_OFFA = K_QXO + 1     # 3 entries: its alphas (b, the pressure difference's mean, variance)
-K_HOLDR = K_OFFA + 3   # per-tick rate of the published position's blend at rest under load
-K_FD = K_HOLDR + 1     # fd.NFK entries: the fault detector's constants
-NK = K_FD + fd.NFK
-# state
-E_OMEGA, E_PD_MEAS, E_PD_FILT, E_UPDATES, E_MODE, E_WFRIC, E_EDGE = range(7)
-# E_MODE: check-valve state of the chamber filter; E_WFRIC: low-passed pump speed (friction
-# sign); E_EDGE: adaptive states on a bound after the last update
-E_PLAST = 7            # 4 entries: chamber filter's adapt.pressure_increments state
-E_CLIPPED = 11         # chamber filter: updates in a row that clipped a parameter
-E_MON = 12             # adapt.NMS entries: the consistency monitor's state
-E_FS = E_MON + adapt.NMS   # adapt.NFS entries: the friction model's state
-E_NL = E_FS + adapt.NFS    # noise_level.NNS entries: the noise level's state
-E_FLOWN = E_NL + noise_level.NNS   # adapt.NFLOW entries: adapt.flow_noise's state
-E_OFFS = E_FLOWN + adapt.NFLOW    # adapt.NOFS entries: adapt.offset_noise's state
-E_FD = E_OFFS + adapt.NOFS        # fd.NFS entries: the fault detector's state
-E_HOLDW = E_FD + fd.NFS  # weight of b in the published position (:func:`published`)
-NE = E_HOLDW + 1
-E_CODE = E_FD + fd.FS_CODE
+# The constants (K) and the state (E) of one estimator: one-element structured arrays whose
+# fields are named as the parameters they come from (core.estimator.params, without the
+# 'estimator.model.' prefix; alpha_*: a low-pass's per-tick factor, i_*: a state's index in x,
+# -1 when the filter has no such state). Each kernel reads them as records: k, e = K[0], E[0].
+CONSTANTS = np.dtype([
+    # validity of a sample (estimator.validity.*): |position| <= x_max (half the stroke plus
+    # the margin), pressures in [pressure_min, pressure_max], |motor speed| bounded
+    ('x_max', 'f8'), ('pressure_min', 'f8'), ('pressure_max', 'f8'),
+    ('max_abs_motor_speed', 'f8'), ('use_pressure', 'f8'), ('isolate', 'f8'),
+    # the filter: model_filter (eq. 4.35 or the chamber filter) or PVA; chambers: ChamberKF
+    ('model_filter', 'f8'), ('chambers', 'f8'), ('n_lin', 'f8'),
+    ('alpha_pressure', 'f8'), ('alpha_friction', 'f8'), ('friction_pressure', 'f8'),
+    ('A_p', 'f8'), ('D_p', 'f8'), ('F_s', 'f8'), ('v_eps', 'f8'), ('i_leak', 'f8'),
+    # the chamber filter: check valves, flows (adapt.parameter_columns), adaptive states
+    ('p_c', 'f8'), ('C_x', 'f8'), ('C_r', 'f8'), ('p_acc', 'f8'), ('c_Ts', 'f8'),
+    ('alpha_compliance', 'f8'), ('i_leakage', 'f8'), ('leakage_range', 'f8', (2,)),
+    ('leakage_excitation', 'f8'), ('i_displacement', 'f8'), ('displacement_range', 'f8', (2,)),
+    ('i_compliance', 'f8'), ('compliance_range', 'f8', (2,)), ('i_friction', 'f8'),
+    ('friction_range', 'f8', (2,)), ('i_external_leakage', 'f8'),
+    ('external_leakage_range', 'f8', (2,)), ('i_frozen', 'f8'), ('adapt_gate', 'f8'),
+    ('i_gm', 'f8'), ('offset_bound', 'f8'), ('i_moved', 'f8'), ('moved_gate', 'f8'),
+    ('stribeck', 'f8'), ('friction', 'f8', (adapt.NFK,)),       # adapt.friction_input's
+    # the Q schedules: the load state's (adapt.maneuver), the position noise's
+    # (adapt.disagree_noise), the offset's (adapt.offset_noise), the flow's (adapt.flow_noise)
+    ('i_load', 'f8'), ('q_load', 'f8'), ('q_load_jump', 'f8'), ('load_jump_z', 'f8'),
+    ('q_x', 'f8'), ('q_x_disagree', 'f8'), ('position_gm_sigma', 'f8'),
+    ('offset_gate', 'f8'), ('q_x_offset', 'f8'), ('offset_alpha', 'f8', (3,)),
+    ('i_flow', 'f8'), ('q_flow', 'f8'), ('flow_gate', 'f8'), ('flow_ticks', 'f8'),
+    ('dp_friction', 'f8'), ('flow_share', 'f8'), ('flow_report', 'f8'),
+    ('hold_rate', 'f8'),        # per tick: the published position's blend at rest under load
+    # the stages with constants of their own
+    ('noise_adapt', 'f8'), ('noise', 'f8', (noise_level.NNK,)),   # noise_level's
+    ('monitor', 'f8', (adapt.NMK,)),                               # adapt.monitor's
+    ('detector', 'f8', (fd.NFK,)),                                 # fault_detector's
+])
+STATE = np.dtype([
+    ('omega', 'f8'),            # the previous sample's motor speed (rad/s)
+    ('pd_meas', 'f8'), ('pd_filt', 'f8'),   # last good measured p_D, its low-pass (Pa)
+    ('updates', 'f8'),          # measurement updates so far
+    ('mode', 'f8'),             # chamber filter: check-valve state
+    ('w_fric', 'f8'),           # low-passed pump speed: the friction sign of eq. 4.36
+    ('edge', 'f8'),             # adaptive states on a bound after the last update
+    ('p_last', 'f8', (4,)),     # chamber filter: adapt.pressure_increments' state
+    ('clipped', 'f8', (1,)),    # chamber filter: updates in a row that clipped a parameter
+    ('hold_weight', 'f8'),      # weight of b in the published position (:func:`published`)
+    ('friction', 'f8', (adapt.NFS,)),           # adapt.friction_input's
+    ('noise', 'f8', (noise_level.NNS,)),        # noise_level's
+    ('flow', 'f8', (adapt.NFLOW,)),             # adapt.flow_noise's
+    ('offset', 'f8', (adapt.NOFS,)),            # adapt.offset_noise's
+    ('monitor', 'f8', (adapt.NMS,)),            # adapt.monitor's
+    ('detector', 'f8', (fd.NFS,)),              # fault_detector's
+])
+
+
+def new_records():
+    """(K, E) of an estimator not packed yet: zeros."""
+    return np.zeros(1, CONSTANTS), np.zeros(1, STATE)
 
 
 class Arrays(NamedTuple):
@@ -95,81 +119,63 @@ def supported(est) -> bool:
 
 
 def pack(est):
-    """(constants, state, arrays) of an Estimator, built once when it is: the state holds a copy
-    of its state arrays (the Estimator then uses views into it), the arrays are the
-    filter's own. Its scalars (E_OMEGA .. E_UPDATES) are set by Estimator.reset."""
+    """(K, E, arrays) of an Estimator, built once when it is: K from its attributes of the
+    same names, E holding a copy of its state arrays (the Estimator then uses views into
+    it), the arrays the filter's own. E's scalars are set by Estimator.reset."""
     kf, d = est.kf, est.detector
-    k = np.zeros(NK)
-    e = np.zeros(NE)
+    K, E = new_records()
+    k, e = K[0], E[0]
     arrays = pack_filter(kf, k, e, est.is_model, est.chambers)
-    k[K_XMAX], k[K_PMIN], k[K_PMAX], k[K_WMAX] = est.x_max, est.p_min, est.p_max, est.w_max
-    k[K_ALPHA_PD], k[K_ALPHA_WF] = est.alpha_pd, est.alpha_wf
-    k[K_USE_P] = est.use_pressure
-    k[K_ISOLATE] = est.isolate
-    k[K_ILOAD], k[K_QLOAD], k[K_QLOADJ], k[K_LOADZ] = (est.i_load, est.q_load,
-                                                      est.q_load_jump, est.load_jump_z)
-    k[K_QX], k[K_QXD], k[K_BDIS] = est.q_x, est.q_x_disagree, est.b_dis
-    k[K_MON:K_MON + adapt.NMK] = est.monitor_k
-    e[E_MON:E_MON + adapt.NMS] = est.monitor_s
+    for name in ('x_max', 'pressure_min', 'pressure_max', 'max_abs_motor_speed',
+                 'alpha_pressure', 'alpha_friction', 'use_pressure', 'isolate', 'i_load',
+                 'q_load', 'q_load_jump', 'load_jump_z', 'q_x', 'q_x_disagree',
+                 'position_gm_sigma', 'q_flow', 'flow_gate', 'flow_ticks', 'flow_share',
+                 'flow_report', 'offset_gate', 'q_x_offset', 'offset_alpha', 'hold_rate'):
+        k[name] = getattr(est, name)
+    k['monitor'], e['monitor'] = est.monitor_k, est.monitor_s
     if est.noise_k is not None:
-        k[K_NADAPT] = 1.0
-        k[K_NL:K_NL + noise_level.NNK] = est.noise_k
-    e[E_NL:E_NL + noise_level.NNS] = est.noise_s
-    k[K_QFLOW], k[K_FLOWK], k[K_FLOWN] = est.q_flow, est.flow_k, est.flow_n
-    k[K_FLOWSH], k[K_FLOWREP] = est.flow_share, est.flow_report
-    e[E_FLOWN:E_FLOWN + adapt.NFLOW] = est.flow_s
-    k[K_OFFG], k[K_QXO] = est.offset_gate, est.q_x_offset
-    k[K_OFFA:K_OFFA + 3] = est.offset_alpha
-    k[K_HOLDR] = est.hold_rate
-    e[E_OFFS:E_OFFS + adapt.NOFS] = est.offset_s
-    k[K_FD:K_FD + fd.NFK] = d.k
-    e[E_FD:E_FD + fd.NFS] = d.s
-    return k, e, arrays
+        k['noise_adapt'], k['noise'] = 1.0, est.noise_k
+    e['noise'], e['flow'], e['offset'] = est.noise_s, est.flow_s, est.offset_s
+    k['detector'], e['detector'] = d.k, d.s
+    return K, E, arrays
 
 
 def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
-    """The filter's part of (k, e) -- what :func:`predict_tick` reads: its model, friction,
-    check-valve and adaptive constants and state -- and its arrays: a ``model`` filter (eq.
-    4.35, ModelKF; with ``chambers`` ChamberKF) or the PVA filter (neither)."""
-    k[K_MODEL], k[K_CHAMBERS] = model, chambers
-    k[K_ILEAK] = -1.0
+    """The filter's part of the records k, e (K[0], E[0]) -- what :func:`predict_tick` reads:
+    its model, friction, check-valve and adaptive constants and state -- and its arrays: a
+    ``model`` filter (eq. 4.35, ModelKF; with ``chambers`` ChamberKF) or the PVA filter
+    (neither)."""
+    k['model_filter'], k['chambers'] = model, chambers
+    for name in ('i_leak', 'i_leakage', 'i_displacement', 'i_compliance', 'i_gm', 'i_friction',
+                 'i_external_leakage', 'i_flow', 'i_moved'):
+        k[name] = -1.0
     if model:
-        k[K_FRIC_P] = kf.friction_uses_pressure
-        k[K_ILEAK] = -1.0 if kf.i_leak is None else kf.i_leak
-        k[K_NLIN] = kf._n_lin
+        k['friction_pressure'] = kf.friction_uses_pressure
+        k['i_leak'] = -1.0 if kf.i_leak is None else kf.i_leak
+        k['n_lin'] = kf._n_lin
         c = kf.c if chambers else kf.h
-        k[K_AP], k[K_DP], k[K_FS], k[K_VEPS] = c.A_p, c.D_p, kf.F_s, kf.v_eps
-    k[K_ILAM] = k[K_IDEL] = k[K_IKAP] = k[K_IGM] = k[K_IPHI] = k[K_IEPS] = -1.0
-    k[K_IFLOW], k[K_FLOWDP] = -1.0, 0.0
+        k['A_p'], k['D_p'], k['F_s'], k['v_eps'] = c.A_p, c.D_p, kf.F_s, kf.v_eps
+        k['i_moved'], k['moved_gate'] = kf.i_moved, kf.moved_gate
     F, G = kf.F, kf.G
     Fm, Gm = np.zeros((1, 1)), np.zeros((1, 1))
     if chambers:
-        k[K_PC] = kf.c.p_c
-        k[K_CX], k[K_CR], k[K_PACC] = kf.c.C_x, kf.c.C_r, kf.c.p_acc
-        k[K_ILAM], k[K_IDEL], k[K_IGM], k[K_BMAX] = kf.i_lam, kf.i_del, kf.i_gm, kf.offset_bound
-        (k[K_LAMLO], k[K_LAMHI]), (k[K_DELLO], k[K_DELHI]) = kf.lam_range, kf.del_range
-        k[K_IKAP], (k[K_KAPLO], k[K_KAPHI]), k[K_CTS] = kf.i_kap, kf.kap_range, kf.c_Ts
-        e[E_EDGE] = kf.edge
-        k[K_IFROZEN], k[K_GATE] = kf.i_frozen, kf.adapt_gate
-        k[K_PEXC] = kf.p_excite
-        e[E_PLAST:E_PLAST + 4] = kf.p_last
-        e[E_CLIPPED] = kf.clipped[0]
-        k[K_ALPHA_DP] = kf.alpha_dp
-        k[K_IPHI], (k[K_PHILO], k[K_PHIHI]) = kf.i_phi, kf.phi_range
-        k[K_IEPS], (k[K_EPSLO], k[K_EPSHI]) = kf.i_eps, kf.eps_range
+        c = kf.c
+        k['p_c'], k['C_x'], k['C_r'], k['p_acc'], k['c_Ts'] = c.p_c, c.C_x, c.C_r, c.p_acc, kf.c_Ts
+        for name in ('i_leakage', 'leakage_range', 'i_displacement', 'displacement_range',
+                     'i_compliance', 'compliance_range', 'i_friction', 'friction_range',
+                     'i_external_leakage', 'external_leakage_range', 'i_gm', 'offset_bound',
+                     'i_frozen', 'adapt_gate', 'leakage_excitation', 'alpha_compliance',
+                     'i_flow', 'dp_friction'):
+            k[name] = getattr(kf, name)
+        e['edge'], e['p_last'], e['clipped'], e['mode'] = kf.edge, kf.p_last, kf.clipped, kf.mode
         if kf.fk is not None:
-            k[K_STRIBECK] = 1.0
-            k[K_FK:K_FK + adapt.NFK] = kf.fk
-            e[E_FS:E_FS + adapt.NFS] = kf.fs
-        k[K_IFLOW], k[K_FLOWDP] = kf.i_flow, kf.dp_friction
-        e[E_MODE] = kf.mode
+            k['stribeck'], k['friction'], e['friction'] = 1.0, kf.fk, kf.fs
         # F, G: the filter's own, overwritten per tick with the mode's pair
         # Gm: the stacked G (3 columns) then the unit-flow columns of adapt.parameter_columns
         # Fm: the stacked F, then the leakage sensitivities of lambda and epsilon
         # (adapt.predict_jacobian)
         Fm = np.hstack((np.vstack([f for f, _ in kf.modes]), kf.Dm))
         Gm = np.hstack((np.vstack([g for _, g in kf.modes]), kf.Lm))
-    k[K_IMOVED], k[K_MOVEDZ] = (kf.i_moved, kf.moved_gate) if model else (-1.0, 0.0)
     if model:
         u = kf.u
         g_leak = kf._g_leak if kf.i_leak is not None else np.zeros(1)
@@ -188,212 +194,215 @@ def predict_filter(kf, chambers: bool, omega: float, p_D: float | None,
     The filter's constants and arrays are packed once (kf._alone); its state (check-valve
     mode, pressure increments, friction model) is passed in and taken back on each call."""
     if getattr(kf, '_alone', None) is None:
-        k, e = np.zeros(NK), np.zeros(NE)
-        a = pack_filter(kf, k, e, True, chambers)       # K_ALPHA_WF 0: w_friction as given
-        kf._alone = k, e, a, entry_point(predict_given, k, e, a, 0.0, 0.0, True, 0.0)
-    k, e, a, predict = kf._alone
+        K, E = new_records()
+        a = pack_filter(kf, K[0], E[0], True, chambers)  # alpha_friction 0: w_friction as given
+        kf._alone = K, E, a, entry_point(predict_given, K, E, a, 0.0, 0.0, True, 0.0)
+    K, E, a, predict = kf._alone
     if chambers:
-        e[E_PLAST:E_PLAST + 4], e[E_FS:E_FS + adapt.NFS] = kf.p_last, kf.fs
-    predict(k, e, a, float(omega), float(omega if w_friction is None else w_friction),
+        E['p_last'], E['friction'] = kf.p_last, kf.fs
+    predict(K, E, a, float(omega), float(omega if w_friction is None else w_friction),
             p_D is not None, 0.0 if p_D is None else float(p_D))
     if chambers:
-        kf.p_last[:], kf.fs[:] = e[E_PLAST:E_PLAST + 4], e[E_FS:E_FS + adapt.NFS]
-        kf.mode = int(e[E_MODE])
+        kf.p_last[:], kf.fs[:] = E['p_last'][0], E['friction'][0]
+        kf.mode = int(E['mode'][0])
 
 
 @njit(cache=True)
-def predict_given(k, e, a, omega, w_friction, use_p, p_D) -> None:
+def predict_given(K, E, a, omega, w_friction, use_p, p_D) -> None:
     """:func:`predict_tick` with the inputs the estimator filters given as they are: the speed
     held at ``omega`` over the period, the friction's speed ``w_friction``, the measured
     ``p_D`` (``use_p`` False: the filter's own)."""
-    e[E_OMEGA] = omega                  # the period's mean speed: (omega + omega) / 2
-    e[E_WFRIC] = w_friction
-    k[K_USE_P] = use_p
-    e[E_PD_FILT] = p_D
-    predict_tick(k, e, a, omega)
+    k, e = K[0], E[0]
+    e.omega = omega                  # the period's mean speed: (omega + omega) / 2
+    e.w_fric = w_friction
+    k.use_pressure = use_p
+    e.pd_filt = p_D
+    predict_tick(K, E, a, omega)
 
 
 @njit(cache=True)
-def position_fault(e) -> bool:
+def position_fault(E) -> bool:
     """This tick's consistency verdict calls for the safe state (core.loop.safe_state)."""
-    return adapt.safe_state(int(e[E_MON + adapt.MS_VERDICT]))
+    return adapt.safe_state(int(E[0].monitor[adapt.MS_VERDICT]))
 
 
 @njit(cache=True)
-def ready(k, e, position, w, pa, pb) -> bool:
+def ready(K, E, position, w, pa, pb) -> bool:
     """This measurement takes the common path (nothing to count, no reason to report)."""
-    if not (math.isfinite(w) and abs(w) <= k[K_WMAX]):
+    k, code = K[0], int(E[0].detector[fd.FS_CODE])
+    if not (math.isfinite(w) and abs(w) <= k.max_abs_motor_speed):
         return False
-    if not (math.isfinite(position) and abs(position) <= k[K_XMAX]):
+    if not (math.isfinite(position) and abs(position) <= k.x_max):
         return False
-    if k[K_USE_P] > 0.5 and not pressure_ok(k, pa, pb):
+    if k.use_pressure > 0.5 and not pressure_ok(k, pa, pb):
         return False
-    return not (k[K_ISOLATE] > 0.5 and (e[E_CODE] == fd.JUMP or e[E_CODE] == fd.STUCK))
+    return not (k.isolate > 0.5 and (code == fd.JUMP or code == fd.STUCK))
 
 
 @njit(cache=True)
 def pressure_ok(k, pa, pb) -> bool:
-    return (math.isfinite(pa) and k[K_PMIN] <= pa <= k[K_PMAX] and
-            math.isfinite(pb) and k[K_PMIN] <= pb <= k[K_PMAX])
+    return (math.isfinite(pa) and k.pressure_min <= pa <= k.pressure_max and
+            math.isfinite(pb) and k.pressure_min <= pb <= k.pressure_max)
 
 
 @njit(cache=True)
-def predict_tick(k, e, a, w):
+def predict_tick(K, E, a, w):
     """One prediction over Ts with the motor speed averaged over the period (its previous
     value and ``w``): the model's inputs (eq. 4.36 friction, or the chamber filter's Stribeck
     curve, its check-valve state, friction and parameter columns), then eq. 4.1-4.2 (with the
     leakage Jacobian when lambda is a state). Chamber filter: (F, G) of the check-valve state
     are copied from the stacked Fm, Gm. ``a``: the :class:`Arrays`."""
+    k, e = K[0], E[0]
     x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm = (a.x, a.P, a.F, a.G, a.u, a.Q, a.tmp,
                                                  a.g_leak, a.ws, a.Fm, a.Gm)
-    omega = 0.5 * (e[E_OMEGA] + w)
-    e[E_OMEGA] = w
-    use_p = k[K_USE_P] > 0.5
-    if k[K_MODEL] > 0.5:                  # chamber filters are model filters too
-        e[E_WFRIC] += k[K_ALPHA_WF] * (omega - e[E_WFRIC])
-    if k[K_CHAMBERS] > 0.5:
+    omega = 0.5 * (e.omega + w)
+    e.omega = w
+    use_p = k.use_pressure > 0.5
+    if k.model_filter > 0.5:                  # chamber filters are model filters too
+        e.w_fric += k.alpha_friction * (omega - e.w_fric)
+    if k.chambers > 0.5:
         u[0] = omega
-        if k[K_STRIBECK] > 0.5:
-            u[1] = adapt.friction_input(k[K_FK:K_FK + adapt.NFK], e[E_FS:E_FS + adapt.NFS], x,
-                                        omega)
+        if k.stribeck > 0.5:
+            u[1] = adapt.friction_input(k.friction, e.friction, x, omega)
         else:
-            pd = e[E_PD_FILT] if use_p else x[2] - x[3]
-            u[1] = friction_estimate(e[E_WFRIC], pd, k[K_FRIC_P] > 0.5, k[K_AP], k[K_DP],
-                                     k[K_FS], k[K_VEPS])
-        mode = 2 * (x[2] < k[K_PC]) + (x[3] < k[K_PC])
-        e[E_MODE] = mode
+            pd = e.pd_filt if use_p else x[2] - x[3]
+            u[1] = friction_estimate(e.w_fric, pd, k.friction_pressure > 0.5, k.A_p, k.D_p,
+                                     k.F_s, k.v_eps)
+        mode = 2 * (x[2] < k.p_c) + (x[3] < k.p_c)
+        e.mode = mode
         n = x.shape[0]
         for i in range(n):
             for j in range(n):
                 F[i, j] = Fm[mode * n + i, j]
             for j in range(G.shape[1]):
                 G[i, j] = Gm[mode * n + i, j]
-        adapt.friction_column(F, G, int(k[K_NLIN]), int(k[K_IPHI]), e[E_FS:E_FS + adapt.NFS])
-        if k[K_ILAM] >= 0 or k[K_IDEL] >= 0 or k[K_IKAP] >= 0:
-            pl = e[E_PLAST:E_PLAST + 4]
-            adapt.pressure_increments(pl, x[2], x[3], k[K_ALPHA_DP])
-            adapt.parameter_columns(F, Gm, mode * n, G.shape[1], int(k[K_NLIN]),
-                                    int(k[K_ILAM]), int(k[K_IDEL]), int(k[K_IKAP]),
-                                    int(k[K_IEPS]), x[2], x[3], pl[2], pl[3], omega, k[K_CX],
-                                    k[K_CR], k[K_PACC], k[K_DP], k[K_CTS])
-    elif k[K_MODEL] > 0.5:
+        adapt.friction_column(F, G, int(k.n_lin), int(k.i_friction), e.friction)
+        if k.i_leakage >= 0 or k.i_displacement >= 0 or k.i_compliance >= 0:
+            pl = e.p_last
+            adapt.pressure_increments(pl, x[2], x[3], k.alpha_compliance)
+            adapt.parameter_columns(F, Gm, mode * n, G.shape[1], int(k.n_lin),
+                                    int(k.i_leakage), int(k.i_displacement),
+                                    int(k.i_compliance), int(k.i_external_leakage), x[2], x[3],
+                                    pl[2], pl[3], omega, k.C_x, k.C_r, k.p_acc, k.D_p, k.c_Ts)
+    elif k.model_filter > 0.5:
         u[0] = omega
-        has_pd = use_p and k[K_FRIC_P] > 0.5
-        u[1] = friction_estimate(e[E_WFRIC], e[E_PD_FILT], has_pd, k[K_AP], k[K_DP], k[K_FS],
-                                 k[K_VEPS])
-        il = int(k[K_ILEAK])
+        has_pd = use_p and k.friction_pressure > 0.5
+        u[1] = friction_estimate(e.w_fric, e.pd_filt, has_pd, k.A_p, k.D_p, k.F_s,
+                                 k.v_eps)
+        il = int(k.i_leak)
         if il >= 0:
-            pd = e[E_PD_FILT] if use_p else x[2]
-            for i in range(int(k[K_NLIN])):
+            pd = e.pd_filt if use_p else x[2]
+            for i in range(int(k.n_lin)):
                 F[i, il] = g_leak[i] * pd
-    il = int(k[K_ILAM])
-    if k[K_CHAMBERS] > 0.5 and il >= 0:
+    il = int(k.i_leakage)
+    if k.chambers > 0.5 and il >= 0:
         n = x.shape[0]
-        ie = int(k[K_IEPS])
-        adapt.predict_jacobian(x, P, F, ws[:n * n].reshape((n, n)), Fm, int(e[E_MODE]) * n, n,
-                               2 * n, int(k[K_NLIN]), x[il], x[ie] if ie >= 0 else 0.0, G, u,
+        ie = int(k.i_external_leakage)
+        adapt.predict_jacobian(x, P, F, ws[:n * n].reshape((n, n)), Fm, int(e.mode) * n, n,
+                               2 * n, int(k.n_lin), x[il], x[ie] if ie >= 0 else 0.0, G, u,
                                Q, tmp)
     else:
         predict(x, P, F, G, u, Q, tmp)
 
 
 @njit(cache=True)
-def advance(k, e, a, w, pa, pb) -> bool:
+def advance(K, E, a, w, pa, pb) -> bool:
     """A sample's prediction: its p_D (when the pressures are valid), :func:`predict_tick`
     with ``w``, the p_D low-pass. Returns whether the pressures are valid."""
+    k, e = K[0], E[0]
     pr_ok = pressure_ok(k, pa, pb)
     if pr_ok:
-        e[E_PD_MEAS] = pa - pb
-    predict_tick(k, e, a, w)
+        e.pd_meas = pa - pb
+    predict_tick(K, E, a, w)
     if pr_ok:
-        e[E_PD_FILT] += k[K_ALPHA_PD] * (e[E_PD_MEAS] - e[E_PD_FILT])
+        e.pd_filt += k.alpha_pressure * (e.pd_meas - e.pd_filt)
     return pr_ok
 
 
 @njit(cache=True)
-def consistency(k, e, a, position) -> int:
+def consistency(K, E, a, position) -> int:
     """The consistency monitor's verdict on this sample (adapt.monitor); the chamber filter's
     position noise follows the disagreement (adapt.disagree_noise)."""
+    k, e = K[0], E[0]
     x, Q = a.x, a.Q
-    flow = e[E_FLOWN + adapt.FL_ACTIVE] > 0.5
-    offset = e[E_OFFS + adapt.OF_OPEN] > 0.5
-    v = adapt.monitor(k[K_MON:K_MON + adapt.NMK], e[E_MON:E_MON + adapt.NMS], position, x[0],
-                      int(e[E_CODE]), int(e[E_CODE]) == fd.DRIFT or flow or offset,
-                      int(e[E_EDGE]))
-    if k[K_CHAMBERS] > 0.5:
-        adapt.disagree_noise(Q, x, int(k[K_IGM]), k[K_BDIS], k[K_MON:K_MON + adapt.NMK],
-                             e[E_MON:E_MON + adapt.NMS], int(e[E_EDGE]), k[K_QX], k[K_QXD],
-                             adapt.load_varying(e[E_OFFS:E_OFFS + adapt.NOFS], k[K_FLOWDP]),
-                             k[K_QXO])
+    code = int(e.detector[fd.FS_CODE])
+    flow = e.flow[adapt.FL_ACTIVE] > 0.5
+    offset = e.offset[adapt.OF_OPEN] > 0.5
+    v = adapt.monitor(k.monitor, e.monitor, position, x[0], code,
+                      code == fd.DRIFT or flow or offset, int(e.edge))
+    if k.chambers > 0.5:
+        adapt.disagree_noise(Q, x, int(k.i_gm), k.position_gm_sigma, k.monitor, e.monitor,
+                             int(e.edge), k.q_x, k.q_x_disagree,
+                             adapt.load_varying(e.offset, k.dp_friction), k.q_x_offset)
     return v
 
 
 @njit(cache=True)
-def estimate(k, e, a, position, w, pa, pb):
+def estimate(K, E, a, position, w, pa, pb):
     """Estimator.update on a usable position sample (``w``: the speed it takes, the held one
     when the sample's is not valid; invalid pressures are left out): :func:`advance`, the
     update with position (and pressures), the adaptive parts, the fault detector and
     :func:`consistency`. Returns (position, innovation, nis, nis_dim, code)."""
-    pr_ok = advance(k, e, a, w, pa, pb)
+    k, e = K[0], E[0]
+    pr_ok = advance(K, E, a, w, pa, pb)
     x, P, Q, H, R, y, S, H1, R1, y1, S1, zm, z1, ws = (a.x, a.P, a.Q, a.H, a.R, a.y, a.S, a.H1,
                                                        a.R1, a.y1, a.S1, a.zm, a.z1, a.ws)
-    use_p = k[K_USE_P] > 0.5
+    use_p = k.use_pressure > 0.5
     iu = -1
-    if k[K_CHAMBERS] > 0.5:
-        iu = adapt.leakage_unexcited(x, int(k[K_ILAM]), k[K_PEXC])
-    if k[K_NADAPT] > 0.5:
-        noise_level.update(k[K_NL:K_NL + noise_level.NNK], e[E_NL:E_NL + noise_level.NNS],
-                           position, pa, pb, pr_ok and use_p, w, R, R1, Q)
+    if k.chambers > 0.5:
+        iu = adapt.leakage_unexcited(x, int(k.i_leakage), k.leakage_excitation)
+    if k.noise_adapt > 0.5:
+        noise_level.update(k.noise, e.noise, position, pa, pb, pr_ok and use_p, w, R, R1, Q)
     if pr_ok and use_p:
         zm[0] = position
-        if k[K_CHAMBERS] > 0.5:
+        if k.chambers > 0.5:
             zm[1] = pa
             zm[2] = pb
         else:
-            zm[1] = e[E_PD_MEAS]
-        nis = update_gated(x, P, H, R, zm, y, S, ws, int(k[K_IFROZEN]), k[K_GATE], iu,
-                           int(k[K_IMOVED]), k[K_MOVEDZ])
+            zm[1] = e.pd_meas
+        nis = update_gated(x, P, H, R, zm, y, S, ws, int(k.i_frozen), k.adapt_gate, iu,
+                           int(k.i_moved), k.moved_gate)
         innov, s00, m = y[0], S[0, 0], zm.shape[0]
         pz = fd.pressure_z(y, S, m)
     else:
         z1[0] = position
-        nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k[K_IFROZEN]), k[K_GATE], iu,
+        nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k.i_frozen), k.adapt_gate, iu,
                            -1, 0.0)
         innov, s00, m = y1[0], S1[0, 0], 1
         pz = 0.0
-    if k[K_CHAMBERS] > 0.5:
-        e[E_EDGE] = adapt.project(x, int(k[K_ILAM]), k[K_LAMLO], k[K_LAMHI], int(k[K_IDEL]),
-                                  k[K_DELLO], k[K_DELHI], int(k[K_IKAP]), k[K_KAPLO],
-                                  k[K_KAPHI], int(k[K_IPHI]), k[K_PHILO], k[K_PHIHI],
-                                  int(k[K_IEPS]), k[K_EPSLO], k[K_EPSHI], int(k[K_IGM]),
-                                  k[K_BMAX],
-                                  e[E_CLIPPED:E_CLIPPED + 1], adapt.EDGE_TICKS)
-    e[E_UPDATES] += 1
-    fd.detect(k[K_FD:K_FD + fd.NFK], e[E_FD:E_FD + fd.NFS], position, innov, s00, pz)
-    if k[K_CHAMBERS] > 0.5:
-        adapt.maneuver(Q, int(k[K_ILOAD]), pz, k[K_LOADZ],
-                       k[K_QLOAD] + e[E_FS + adapt.FS_Q], k[K_QLOADJ])
-        b_sigma = k[K_BDIS] * e[E_NL + noise_level.NS_SX]
-        of = e[E_OFFS:E_OFFS + adapt.NOFS]
-        adapt.offset_noise(x, int(k[K_IGM]), b_sigma, of, k[K_OFFA], k[K_OFFA + 1],
-                           k[K_OFFA + 2], k[K_OFFG], k[K_FLOWDP])
-        rest = (k[K_STRIBECK] > 0.5 and e[E_FS + adapt.FS_N] >= k[K_FK + adapt.FK_NREST]
-                and not adapt.load_varying(of, k[K_FLOWDP]))
+    if k.chambers > 0.5:
+        lam, dlt, kap = k.leakage_range, k.displacement_range, k.compliance_range
+        phi, eps = k.friction_range, k.external_leakage_range
+        e.edge = adapt.project(x, int(k.i_leakage), lam[0], lam[1], int(k.i_displacement),
+                               dlt[0], dlt[1], int(k.i_compliance), kap[0], kap[1],
+                               int(k.i_friction), phi[0], phi[1], int(k.i_external_leakage),
+                               eps[0], eps[1], int(k.i_gm), k.offset_bound, e.clipped,
+                               adapt.EDGE_TICKS)
+    e.updates += 1
+    fd.detect(k.detector, e.detector, position, innov, s00, pz)
+    if k.chambers > 0.5:
+        adapt.maneuver(Q, int(k.i_load), pz, k.load_jump_z,
+                       k.q_load + e.friction[adapt.FS_Q], k.q_load_jump)
+        b_sigma = k.position_gm_sigma * e.noise[noise_level.NS_SX]
+        of = e.offset
+        adapt.offset_noise(x, int(k.i_gm), b_sigma, of, k.offset_alpha[0], k.offset_alpha[1],
+                           k.offset_alpha[2], k.offset_gate, k.dp_friction)
+        rest = (k.stribeck > 0.5 and e.friction[adapt.FS_N] >= k.friction[adapt.FK_NREST]
+                and not adapt.load_varying(of, k.dp_friction))
         # at rest under a held load (beyond what friction holds): publish x_hat + b
-        r = k[K_HOLDR] if rest and abs(x[2] - x[3]) > k[K_FLOWDP] else -k[K_HOLDR]
-        e[E_HOLDW] = min(1.0, max(0.0, e[E_HOLDW] + r))
+        r = k.hold_rate if rest and abs(x[2] - x[3]) > k.dp_friction else -k.hold_rate
+        e.hold_weight = min(1.0, max(0.0, e.hold_weight + r))
         adapt.flow_noise(
-            Q, x, int(k[K_IFLOW]), int(k[K_IGM]), b_sigma, k[K_FLOWK], k[K_QFLOW], rest,
-            e[E_FLOWN:E_FLOWN + adapt.NFLOW], k[K_FLOWN], k[K_FK:K_FK + adapt.NFK],
-            k[K_FLOWDP], k[K_FLOWSH], k[K_FLOWREP])
-    consistency(k, e, a, position)
-    return published(e, x, int(k[K_IGM])), innov, nis, m, int(e[E_CODE])
+            Q, x, int(k.i_flow), int(k.i_gm), b_sigma, k.flow_gate, k.q_flow, rest, e.flow,
+            k.flow_ticks, k.friction, k.dp_friction, k.flow_share, k.flow_report)
+    consistency(K, E, a, position)
+    return published(E, x, int(k.i_gm)), innov, nis, m, int(e.detector[fd.FS_CODE])
 
 
 @njit(cache=True)
-def published(e, x, i_gm) -> float:
+def published(E, x, i_gm) -> float:
     """The position the estimate publishes: x_hat, and at rest under a held load (blended in
     and out) x_hat + b, the sensor's reading without its white noise."""
     if i_gm < 0:
         return x[0]
-    return x[0] + e[E_HOLDW] * x[i_gm]
+    return x[0] + E[0].hold_weight * x[i_gm]

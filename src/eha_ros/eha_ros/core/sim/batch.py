@@ -307,4 +307,4 @@ def _dummy_estimator():
     """Arrays of the estimator stepper's types when the loop has no estimator."""
     from ..estimator import stepper as ES
     from ..kernel_records import placeholder
-    return np.zeros(ES.NK), np.zeros(ES.NE), placeholder(ES.Arrays)
+    return (*ES.new_records(), placeholder(ES.Arrays))

@@ -95,7 +95,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
     Python's) / NOISE (draw the next noise block, call again), u the last command.
     """
     S, U, meas, aux = plant.S, plant.U, plant.meas, plant.aux
-    ek, ee, ea = est                    # estimator stepper: constants, state, Arrays
+    ek, ee, ea = est                    # estimator stepper: constants K, state E, Arrays
     ck, cc, ca = ctl                    # controller stepper: constants, state, Arrays
     x, Pe, Q, Fx, Gx = ea.x, ea.P, ea.Q, ca.Fx, ca.Gx
     ms, hs, g = mgr.ms, mgr.hs, mgr.g   # switch manager stepper: Arrays
@@ -134,7 +134,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         w_act = meas[L.M_W0 + ch]
         if has_est:
             x_hat, innov, nis, nd, code = ES.estimate(ek, ee, ea, pos, w_act, pa, pb)
-            w_act = ee[ES.E_OMEGA]          # the estimate's motor speed, as in EstimateResult
+            w_act = ee[0].omega             # the estimate's motor speed, as in EstimateResult
         else:
             x_hat, innov, nis, nd, code = pos, math.nan, math.nan, 0, 0
         CS.request(ck, cc, ref)
@@ -176,7 +176,7 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         r[R_V0] = v0
         r[R_GM] = gm0
         r[R_VHAT] = x[1] if has_est else math.nan
-        r[R_VERDICT] = ee[ES.E_MON + EA.MS_VERDICT] if has_est else 0
+        r[R_VERDICT] = ee[0].monitor[EA.MS_VERDICT] if has_est else 0
         r[R_SKIP] = 0
         r[R_P] = S[L.S_PA]
         r[R_P + 1] = S[L.S_PB]
