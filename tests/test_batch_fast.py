@@ -87,16 +87,19 @@ def test_batch_stack_run_equals_ticks():
     t = np.arange(n) * 1e-3
     refs = 2e-3 * np.sin(2 * np.pi * 5.0 * t)
     loads = np.where(t >= 0.8, 5e3, 0.0)
-    a, b = BatchStack(seed=3), BatchStack(seed=3)
-    ticks = [a.tick(r, f) for r, f in zip(refs, loads)]
-    fast = b.run(refs[:700], loads[:700])
+    a, b, c = BatchStack(seed=3), BatchStack(seed=3), BatchStack(seed=3)
+    ticks = [a.tick(r, f) for r, f in zip(refs, loads)]     # the compiled tick, one by one
+    fast = b.run(refs[:700], loads[:700])                   # in segments
     rest = b.run(refs[700:], loads[700:])
+    slow = c.run(refs, loads, fast=False)                   # the Python objects
     for name in ('seq', 'reference', 'measured', 'estimate', 'truth', 'command',
                  'motor_speed_0', 'motor_speed_1', 'active_channel'):
         col = np.concatenate((fast[name], rest[name]))
         assert np.array_equal(col, [getattr(tk, name) for tk in ticks]), name
-    assert b.k == a.k == n
-    assert b._loop.fast_ticks >= n - 2
+        assert np.array_equal(col, slow[name]), name
+    assert b.k == a.k == c.k == n
+    assert b._loop.fast_ticks >= n - 2 and a._loop.fast_ticks >= n - 2
+    assert c._loop.fast_ticks == 0
 
 
 @pytest.mark.parametrize('over', [{'estimator.filter': 'pva'},
@@ -111,11 +114,13 @@ def test_estimator_variants_bit_identical(over):
     t = np.arange(n) * 1e-3
     refs, loads = 2e-3 * np.sin(2 * np.pi * 3.0 * t), np.where(t > 0.8, 8e3, 0.0)
     ov = {'estimator': {f'estimator:{k}': v for k, v in over.items()}}
-    a, b = BatchStack(seed=2, overrides=ov), BatchStack(seed=2, overrides=ov)
+    a, b, c = (BatchStack(seed=2, overrides=ov) for _ in range(3))
     ticks = [a.tick(r, f) for r, f in zip(refs, loads)]
     fast = b.run(refs, loads)
+    slow = c.run(refs, loads, fast=False)
     for name in ('estimate', 'command', 'truth', 'measured'):
         assert np.array_equal(fast[name], [getattr(tk, name) for tk in ticks]), name
+        assert np.array_equal(fast[name], slow[name]), name
     assert b._loop.fast_ticks > 700
 
 
@@ -135,11 +140,13 @@ def test_batch_stack_run_equals_ticks_through_an_acceleration_limited_step():
     n = 1200
     refs = np.where(np.arange(n) >= 200, 5e-3, 0.0)
     loads = np.zeros(n)
-    a, b = BatchStack(seed=4), BatchStack(seed=4)
+    a, b, c = BatchStack(seed=4), BatchStack(seed=4), BatchStack(seed=4)
     ticks = [a.tick(r, f) for r, f in zip(refs, loads)]
     fast = b.run(refs, loads)
+    slow = c.run(refs, loads, fast=False)
     for name in ('reference', 'estimate', 'truth', 'command'):
         assert np.array_equal(fast[name], [getattr(tk, name) for tk in ticks]), name
+        assert np.array_equal(fast[name], slow[name]), name
     assert a.controller.ref.rate == b.controller.ref.rate == 0.0
     assert b._loop.fast_ticks >= n - 2
     assert max(fast['truth']) < 5e-3 * 1.05              # the issue 6 overshoot bound

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from eha_ros.core.sim.batch import BatchLoop, BatchStack, node_params
+from eha_ros.core.sim.batch import BatchStack, node_params
 from eha_ros.core.sim.closed_loop import R_FAULT, R_U, R_X, R_XHAT, R_XM
 from eha_ros.core.estimator import adapt, tuning
 from eha_ros.core.estimator import fault_detector as fd
@@ -33,10 +33,8 @@ def plant(scale, noise=True):
 
 
 def stack(scale, seed=1, faults=None, est=None, noise=True):
-    s = BatchStack(seed=seed, overrides={'plant_sim': plant(scale, noise),
-                                         'estimator': est or {}})
-    s._loop = BatchLoop(s.plant, s.estimator, s.controller, faults=faults)
-    return s
+    return BatchStack(seed=seed, overrides={'plant_sim': plant(scale, noise),
+                                            'estimator': est or {}}, faults=faults)
 
 
 def run(s, refs, loads=None):

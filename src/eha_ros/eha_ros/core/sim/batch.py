@@ -70,18 +70,22 @@ class Tick:
 class BatchStack:
     """Plant + estimator + controller cores; ``tick(reference, load)`` advances one Ts."""
 
-    def __init__(self, config_dir: str | None = None, seed: int = 1, overrides=None):
-        """``overrides``: {node: -p assignments} for plant_sim, estimator, controller."""
+    def __init__(self, config_dir: str | None = None, seed: int = 1, overrides=None,
+                 faults=None):
+        """``overrides``: {node: -p assignments} for plant_sim, estimator, controller;
+        ``faults``: BatchLoop's."""
         from ..config.registry import schema_for
         ov = overrides or {}
         params = {n: node_params(n, schema_for(n), config_dir, ov.get(n))
                   for n in ('plant_sim', 'estimator', 'controller')}
-        self._loop = build_loop(params, seed, manager=False)
+        self._loop = build_loop(params, seed, faults=faults, manager=False)
         self.plant_params, self.controller_params = params['plant_sim'], params['controller']
-        self.plant, self.estimator, self.controller = self._loop.plant, self._loop.est, \
-            self._loop.ctl
         self.Ts = self.plant.Ts
         self.k = 0
+
+    plant = property(lambda self: self._loop.plant, doc='the loop\'s EhaPlant')
+    estimator = property(lambda self: self._loop.est, doc='its Estimator')
+    controller = property(lambda self: self._loop.ctl, doc='its PositionController')
 
     def tick(self, reference: float, load: float = 0.0) -> Tick:
         """One Ts by BatchLoop.tick (the stack's order and its safe state)."""
@@ -123,12 +127,13 @@ class BatchLoop:
     process, tick by tick or fast: the one closed-loop harness of the batch runs, campaigns,
     the plant's and the estimator's thesis checks.
 
-    :meth:`tick` is the reference semantics, what the nodes do (the loop body of
-    core.sim.switchover.run); :meth:`run` with ``fast=True`` advances the ticks where
-    nothing event-like happens in compiled segments (core.sim.closed_loop) and does every other
-    tick -- scheduled faults and commands, a monitor verdict the state machine acts on, a
-    switch's valve/drive steps, rejected measurements -- with :meth:`tick`. Both give the same
-    numbers, bit for bit (tests/test_batch_fast.py).
+    One loop body: a tick is the compiled one of core.sim.closed_loop.segment, for one tick
+    (:meth:`tick`) or many (:meth:`run`), and every tick that anything
+    event-like touches -- scheduled faults and commands, a monitor verdict the state machine
+    acts on, a switch's valve/drive steps, rejected measurements -- is done by the Python
+    objects (:meth:`python_tick`, the reference semantics: what the nodes do). Both write
+    their row with closed_loop.record and give the same numbers, bit for bit
+    (tests/test_batch_fast.py: ``run(fast=False)`` does every tick in Python).
     """
 
     def __init__(self, plant, estimator, controller, manager=None, hold_ticks: int = 0,
@@ -156,13 +161,24 @@ class BatchLoop:
         self.segments = self.fast_ticks = 0
         self.holding = False               # controller in the safe state (core.loop.safe_state)
 
-    # ------------------------------------------------------------------ reference tick
     def tick(self, k: int, reference: float, load: float, row) -> None:
-        """Tick k as the stack does it; writes its record ``row`` (core.sim.closed_loop R_*)."""
-        from .closed_loop import (R_ACTIVE, R_BYPASS, R_CHANNEL, R_EN, R_FAULT, R_I, R_IM,
-                                  R_GM, R_INNOV, R_NIS, R_NISDIM, R_P, R_PM, R_SKIP, R_STATE,
-                                  R_T, R_U, R_V0, R_VALVE, R_VERDICT, R_VHAT, R_W, R_WM, R_X,
-                                  R_X0, R_XHAT, R_XM)
+        """Tick k as the stack does it; writes its record ``row`` (core.sim.closed_loop R_*):
+        compiled when nothing event-like is in it, else :meth:`python_tick`."""
+        if self._compiled(k):
+            one = np.array([float(reference)]), np.array([float(load)])
+            if self._segment(k, k + 1, k, *one, row[None, :]) > k:
+                return
+        self.python_tick(k, reference, load, row)
+
+    def _compiled(self, k: int) -> bool:
+        """Tick k may be the compiled one: nothing scheduled at it, nothing Python's pending."""
+        return (self.fast_supported() and k not in self.faults and k not in self.commands
+                and k not in self.events and self._ready())
+
+    # ------------------------------------------------------------------ reference tick
+    def python_tick(self, k: int, reference: float, load: float, row) -> None:
+        """Tick k with the Python objects (events included): the reference semantics."""
+        from . import closed_loop as CL
         from ..plant.layout import S_GM, S_V
         from ..redundancy.health import ChannelSample
         plant, est, ctl, mgr = self.plant, self.est, self.ctl, self.mgr
@@ -212,24 +228,16 @@ class BatchLoop:
             u = ctl.update(x_hat, w_act).speed_ref
         plant.step(u, load)
         self.u = u
-        tr = plant.truth()
-        row[R_T], row[R_X], row[R_X0], row[R_XM], row[R_XHAT] = plant.t, tr.position, x0, \
-            m.position, x_hat
-        row[R_U], row[R_NIS], row[R_INNOV], row[R_FAULT], row[R_NISDIM] = u, nis, innov, code, nd
-        row[R_W:R_W + 2], row[R_WM:R_WM + 2], row[R_I:R_I + 2] = \
-            tr.motor_speed, m.motor_speed, tr.motor_current
-        row[R_VALVE:R_VALVE + 2], row[R_BYPASS] = tr.valve_fraction, tr.bypass_fraction
-        row[R_EN:R_EN + 2] = plant.measure().drive_enabled
-        row[R_CHANNEL] = m.active_channel
-        row[R_PM], row[R_PM + 1], row[R_IM:R_IM + 2] = m.pressure_a, m.pressure_b, m.motor_current
-        row[R_V0], row[R_VHAT], row[R_VERDICT], row[R_SKIP] = v0, v_hat, verdict, skipped
-        row[R_GM] = gm0
-        row[R_P], row[R_P + 1] = tr.pressure_a, tr.pressure_b
         if mgr is not None:
             from ..redundancy.state_machine import STATE_CODES
-            row[R_ACTIVE], row[R_STATE] = mgr.active, STATE_CODES[mgr.name]
+            active, state = mgr.active, STATE_CODES[mgr.name]
         else:
-            row[R_ACTIVE] = row[R_STATE] = m.active_channel
+            active = state = m.active_channel
+        CL.record(row, plant.arrays, float(x0), v0, gm0, float(m.position),
+                  np.asarray(m.motor_speed, float), np.asarray(m.motor_current, float),
+                  float(m.pressure_a), float(m.pressure_b), int(m.active_channel), float(x_hat),
+                  float(v_hat), float(u), float(nis), float(innov), int(code), int(nd),
+                  int(verdict), float(skipped), int(active), int(state))
 
     # ------------------------------------------------------------------ fast run
     def run(self, references, loads=None, fast: bool = True, k0: int = 0):
@@ -255,7 +263,7 @@ class BatchLoop:
                     break
                 wait = 1 if k > start else min(2 * wait, 64)
                 retry = k + 1 if k > start else k + wait
-            self.tick(k, refs[k - k0], loads[k - k0], rec[k - k0])
+            self.python_tick(k, refs[k - k0], loads[k - k0], rec[k - k0])
             k += 1
         return rec
 
