@@ -104,7 +104,7 @@ def dds_latency(duration: float = 10.0) -> dict:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from eha_msgs.msg import ActuatorState, PositionEstimate
-    from ..nodes.common import stream_qos
+    from ..nodes.common import qos_of
     from ..stack import spawn
 
     env = dict(os.environ)
@@ -134,9 +134,8 @@ def dds_latency(duration: float = 10.0) -> dict:
             else:
                 est_t[msg.seq] = time.monotonic_ns()
 
-        qos = stream_qos()
-        node.create_subscription(ActuatorState, T.STATE.path, on_state, qos)
-        node.create_subscription(PositionEstimate, T.ESTIMATE.path, on_est, qos)
+        node.create_subscription(ActuatorState, T.STATE.path, on_state, qos_of(T.STATE))
+        node.create_subscription(PositionEstimate, T.ESTIMATE.path, on_est, qos_of(T.ESTIMATE))
         ex = SingleThreadedExecutor()
         ex.add_node(node)
         stop = threading.Event()

@@ -42,7 +42,7 @@ from ..core.config.params import ParamError, Schema
 from ..core.stats import Counters, Histogram, RingStats
 from . import diag
 from .common import (PlantState, StartGate, bind, channel_ok, declare_and_validate,
-                     latched_qos, publish_counted, stream_qos)
+                     publish_counted, qos_of)
 from .compose import unlocked
 from .managed import state_label, transition
 from ..core import topics as T
@@ -111,20 +111,20 @@ class PlantSide(LifecycleNodeMixin):
         if program.exclusive:
             self.refuse_if_other_plant(p[q + 'startup_discovery'])
 
-        qos = stream_qos()
-        self.pub_state = self.create_publisher(ActuatorState, T.STATE.name, qos)
-        self.pub_truth = (self.create_publisher(PlantTruth, T.TRUTH.name, qos)
+        self.pub_state = self.create_publisher(ActuatorState, T.STATE.name, qos_of(T.STATE))
+        self.pub_truth = (self.create_publisher(PlantTruth, T.TRUTH.name, qos_of(T.TRUTH))
                           if self.hw.has_truth else None)
         self.pub_diag = diag.publisher(self)
         self.pub_clock = self.create_publisher(Clock, '/clock', 10) if self.lockstep else None
         self.plant_state = PlantState(self)
         self.plant_state.set(False)
-        self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command, qos)
+        self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command,
+                                 qos_of(T.COMMAND))
         if hasattr(self.hw, 'set_load'):
             self.create_subscription(ExternalLoad, T.LOAD_FORCE.name,
-                                     lambda m: self.hw.set_load(m.force), qos)
+                                     lambda m: self.hw.set_load(m.force), qos_of(T.LOAD_FORCE))
         self.create_subscription(ChannelSelect, T.CHANNEL_SELECT.name, self.on_select,
-                                 latched_qos())
+                                 qos_of(T.CHANNEL_SELECT))
         if hasattr(self.hw, 'inject_fault'):
             self.create_service(InjectFault, T.INJECT_FAULT.name, self.on_fault)
         if program.bridge_services:

@@ -31,8 +31,7 @@ from ..core.sweep.params import SCHEMA, build_plan
 from ..core.stats import LoopStats
 from ..core.sweep.session import from_params, print_table
 from . import diag
-from .common import (PLANT_STATE_TOPIC, declare_and_validate, factory, latched_qos, publish_counted,
-                     run, stream_qos)
+from .common import declare_and_validate, factory, publish_counted, qos_of, run
 from ..core import topics as T
 
 MARGIN_TICKS = 30           # data of a tick is complete this many ticks after its state
@@ -73,24 +72,23 @@ class Sweep:
         self.pub_load = None
         if self.session.excite == 'load':
             self.pub_load = self.create_publisher(ExternalLoad, T.LOAD_FORCE.name,
-                                                  stream_qos())
+                                                  qos_of(T.LOAD_FORCE))
         self.loop = LoopStats(plan.Ts)
         self.ready_since = None
         self.commands_seen = 0
         self.plant_active = True           # eha/plant_state; not heard: taken as active
         self.done = False
         self.exit_code = 0
-        qos = stream_qos()
-        self.pub = self.create_publisher(PositionReference, T.REFERENCE.name, qos)
+        self.pub = self.create_publisher(PositionReference, T.REFERENCE.name,
+                                         qos_of(T.REFERENCE))
         self.pub_diag = diag.publisher(self)
-        self.create_subscription(State, PLANT_STATE_TOPIC, self.on_plant_state,
-                                 latched_qos())
-        self.create_subscription(ActuatorState, T.STATE.name, self.on_state, qos)
-        self.create_subscription(PositionEstimate, T.ESTIMATE.name, self.on_estimate, qos)
-        self.create_subscription(PlantTruth, T.TRUTH.name, self.on_truth, qos)
-        self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command, qos)
-        self.create_subscription(RedundancyStatus, T.REDUNDANCY.name, self.on_redundancy,
-                                 latched_qos())
+        for topic, msg, callback in ((T.PLANT_STATE, State, self.on_plant_state),
+                                     (T.STATE, ActuatorState, self.on_state),
+                                     (T.ESTIMATE, PositionEstimate, self.on_estimate),
+                                     (T.TRUTH, PlantTruth, self.on_truth),
+                                     (T.COMMAND, ActuatorCommand, self.on_command),
+                                     (T.REDUNDANCY, RedundancyStatus, self.on_redundancy)):
+            self.create_subscription(msg, topic.name, callback, qos_of(topic))
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'sweep: {p["sweep.mode"]}, {plan.n_ticks * plan.Ts:.1f} s planned, writing '

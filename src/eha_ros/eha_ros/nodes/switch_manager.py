@@ -27,7 +27,7 @@ from ..core.redundancy.params import SCHEMA
 from ..core.stats import Counters, LoopStats
 from ..core.loop.supervisor import LoopSupervisor, SupervisorParams
 from . import diag
-from .common import declare_and_validate, factory, latched_qos, publish_counted, run, stream_qos
+from .common import declare_and_validate, factory, publish_counted, qos_of, run
 from ..core import topics as T
 
 
@@ -69,16 +69,17 @@ class SwitchManagerNode:
         self.sup = LoopSupervisor(SupervisorParams.from_params(p, realtime))
         self.sup_reported = None
         self.pub_select = self.create_publisher(ChannelSelect, T.CHANNEL_SELECT.name,
-                                                latched_qos())
+                                                qos_of(T.CHANNEL_SELECT))
         self.pub_status = self.create_publisher(RedundancyStatus, T.REDUNDANCY.name,
-                                                latched_qos())
+                                                qos_of(T.REDUNDANCY))
         self.pub_diag = diag.publisher(self)
-        qos = stream_qos()
-        deep = stream_qos()
-        deep.depth = 200            # a starved executor catches up instead of dropping
-        self.create_subscription(ActuatorState, T.STATE.name, self.on_state, deep)
-        self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command, qos)
-        self.create_subscription(PositionEstimate, T.ESTIMATE.name, self.on_estimate, qos)
+        # the state's queue deeper: a starved executor catches up instead of dropping
+        self.create_subscription(ActuatorState, T.STATE.name, self.on_state,
+                                 qos_of(T.STATE, depth=200))
+        self.create_subscription(ActuatorCommand, T.COMMAND.name, self.on_command,
+                                 qos_of(T.COMMAND))
+        self.create_subscription(PositionEstimate, T.ESTIMATE.name, self.on_estimate,
+                                 qos_of(T.ESTIMATE))
         self.create_service(SwitchChannel, T.SWITCH_CHANNEL.name, self.on_switch)
         from rclpy.clock import Clock, ClockType
         # wall time, also in lock-step: a stalled loop stops the simulated clock, and on the

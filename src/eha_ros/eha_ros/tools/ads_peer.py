@@ -82,12 +82,12 @@ class PeerNode:
     def __init__(self, peer):
         from eha_msgs.msg import ExternalLoad
         from eha_msgs.srv import InjectFault
-        from ..nodes.common import stream_qos
+        from ..nodes.common import qos_of
         super().__init__('ads_peer')
         self.peer = peer
         self.create_service(InjectFault, T.INJECT_FAULT.name, self.on_fault)
         self.create_subscription(ExternalLoad, T.LOAD_FORCE.name, self.on_load,
-                                 stream_qos())
+                                 qos_of(T.LOAD_FORCE))
 
     def on_fault(self, req, resp):
         ok, text, tick = self.peer.inject_fault(req.fault, int(req.channel), req.magnitude,

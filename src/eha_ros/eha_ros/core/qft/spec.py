@@ -234,7 +234,9 @@ def load_spec(path: str) -> QftSpec:
 
 
 def default_spec() -> QftSpec:
-    """The schema defaults (= the shipped thesis specification)."""
+    """The schema defaults: the thesis' specification (Table 4.5, eqs. 4.58-4.61) with the
+    thesis' controller structure; the shipped design's choices (K, zp_max, biquads) are
+    config/qft_spec.yaml's, read by :func:`configured_spec`."""
     return QftSpec(QFT_SPEC_SCHEMA.validate({}))
 
 

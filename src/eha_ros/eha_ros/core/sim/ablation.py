@@ -8,13 +8,13 @@ scenario's own, under DIR/<stage>/. The table compares each stage's summary with
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 
 import yaml
 
 from ..config.cli import UsageError
+from ..io.report import write_json
 
 # stage -> the estimator.* overrides that switch it off (docs/parameters.md for each key)
 STAGES = {
@@ -100,8 +100,7 @@ def run(stages: list, scenarios: list, family: str, seeds: list, out: str, clien
                                    report=False)
     from . import scenarios as SC
     result = table(summaries, family, seeds, {n: SC.load(n).specs for n in scenarios})
-    with open(os.path.join(out, 'ablation.json'), 'w', encoding='utf-8') as f:
-        json.dump(result, f, indent=1)
+    write_json(os.path.join(out, 'ablation.json'), result)
     with open(os.path.join(out, 'ablation.md'), 'w', encoding='utf-8') as f:
         f.write('\n'.join(markdown(result)) + '\n')
     return result

@@ -14,10 +14,14 @@ from ..redundancy.state_machine import STATE_CODES  # noqa: F401 (callers)
 from .batch import node_params
 
 
+def for_node(node: str, overrides: dict | None) -> dict:
+    """-p assignments addressed to ``node`` (``key`` -> ``node:key``)."""
+    return {k if ':' in k else f'{node}:{k}': v for k, v in (overrides or {}).items()}
+
+
 def switch_params(overrides: dict | None = None) -> dict:
     """switch_manager parameters from its files in config/ (the node registry's)."""
-    named = {k if ':' in k else f'switch_manager:{k}': v for k, v in (overrides or {}).items()}
-    return node_params('switch_manager', SCHEMA, overrides=named)
+    return node_params('switch_manager', SCHEMA, overrides=for_node('switch_manager', overrides))
 
 
 @dataclass
@@ -42,10 +46,8 @@ def build(scn: Scenario, overrides: dict | None = None, plant_overrides: dict | 
     """(BatchLoop, references, loads) of scenario ``scn`` (:func:`run`'s arguments): the loop of
     core.sim.batch.build_loop on config/'s nodes."""
     from .batch import build_loop, nominal_params
-    from ..hardware.sim_params import SCHEMA as PLANT_SIM
-    params = nominal_params()
-    params['plant_sim'] = node_params('plant_sim', PLANT_SIM, overrides=plant_overrides)
-    params['switch_manager'] = switch_params(overrides)
+    params = nominal_params(overrides={**for_node('plant_sim', plant_overrides),
+                                       **for_node('switch_manager', overrides)})
     Ts = params['plant_sim']['plant.sim.Ts']
     n = int(round(scn.duration / Ts))
     refs = np.array([scn.reference(k * Ts) for k in range(n)])
