@@ -24,7 +24,7 @@ DERIVED = {
     'moved_gate': 'model.load_jump_z', 'stribeck': 'model.friction',
     'friction': 'model.friction_* and the plant (adapt.friction_input)', 'q_x': 'model.q[0]',
     'flow_ticks': 'model.flow_time / Ts', 'dp_friction': 'plant friction, friction_range',
-    'offset_alpha': 'model.offset_time, offset_load_mean, offset_load_time',
+    'alpha_load': 'model.offset_load_mean, offset_load_time',
     'hold_rate': 'Ts / model.hold_blend_time', 'noise_adapt': 'noise.adapt',
     'noise': 'noise.* (noise_level.constants)', 'monitor': 'monitor.*',
     'detector': 'fault.* (fault_detector)',

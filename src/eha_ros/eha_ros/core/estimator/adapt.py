@@ -37,10 +37,9 @@ Projection: after each update the adaptive states are clipped to their ranges an
 sensor's Gauss-Markov offset b to +-offset_bound (the sensor's own error band); while filter
 and sensor disagree beyond the band, or a parameter sits on its bound, the position's process
 noise opens (:func:`disagree_noise`), so the estimate does not stay away from the measurement,
-whatever the model says; it opens part way while b is larger than the sensor's offset can be
-under a varying load (:func:`offset_noise`). Also here: the EKF predict with the leakage
-Jacobian, the load-step process noise (:func:`maneuver`) and the consistency monitor
-(:func:`monitor`).
+whatever the model says; it opens part way under a varying load (:func:`load_variation`).
+Also here: the EKF predict with the leakage Jacobian, the load-step process noise
+(:func:`maneuver`) and the consistency monitor (:func:`monitor`).
 """
 from __future__ import annotations
 
@@ -76,10 +75,9 @@ NMS = 6
 FL_N, FL_DP, FL_ACTIVE = 0, 1, 2
 NFLOW = 3
 
-# offset_noise state (array of): mean square of b / b_sigma, mean and variance of p_A - p_B,
-# open (1) or not
-OF_B2, OF_DPM, OF_DPV, OF_OPEN = 0, 1, 2, 3
-NOFS = 4
+# load_variation state (array lv): mean of p_A - p_B, its variance about that mean
+LV_DPM, LV_DPV = 0, 1
+NLV = 2
 
 
 @njit(cache=True)
@@ -278,9 +276,8 @@ def monitor(mk, ms, z, x_hat, sensor_code, drift, edge) -> int:
     model error do not).
 
     - MODEL: a slow persistent innovation bias (the detector's CUSUM), an adaptive state on
-      its bound, an unmodelled flow or an implausible offset under load (the callers pass the
-      first, the flow and the offset as ``drift``): the model is wrong; adaptation absorbs what
-      is within its ranges;
+      its bound or an unmodelled flow (the callers pass the first and the flow as ``drift``):
+      the model is wrong; adaptation absorbs what is within its ranges;
     - DISAGREE: |low-passed d| above the sensor's error band for MK_N samples: the filter
       holds the estimate away from the measurement by more than the sensor can be wrong;
     - SENSOR: the fault detector reports a stuck sensor (frozen readings), or a jump (a fast
@@ -323,46 +320,24 @@ def monitor(mk, ms, z, x_hat, sensor_code, drift, edge) -> int:
 
 
 @njit(cache=True)
-def offset_noise(x, i_gm, b_sigma, of, alpha, alpha_m, alpha_v, offset_gate, dp_load) -> bool:
-    """Is the sensor-offset estimate b a model error under load? (covariance matching of a
-    state correction against its own model, Mehra 1972, "Approaches to adaptive filtering",
-    IEEE TAC 17(5); Bar-Shalom, Li, Kirubarajan 2001, sec. 5.4 consistency.)
-
-    b is the sensor's Gauss-Markov offset, stationary with sigma b_sigma (the datasheet's at the
-    measured noise level): its mean square over 1/alpha updates stays near b_sigma^2. Above
-    offset_gate^2 b_sigma^2 (2 sigma rms: b spends most of the time beyond what the sensor wanders)
-    while the pressure difference varies by more than dp_load rms (its deviation from a mean
-    over 1/alpha_m updates, squared and averaged over 1/alpha_v: a varying load beyond what
-    friction holds, with leakage and compressibility flows the model gets wrong, reversing
-    faster than the adaptive states follow; a load step's deviation adds at most
-    dp^2 alpha_v/(2 alpha_m) to it, 1/16 with the defaults: a 5 kN step, 1.94 MPa, reaches
-    0.49 MPa rms, so neither a held load nor its removal opens it), the offset is the model's
-    velocity error integrated, not the sensor's: True, reported as the monitor's MODEL verdict
-    while open (the position noise under any varying load is :func:`disagree_noise`'s). A
-    held load is
-    :func:`flow_noise`'s (a steady leak, learnt as a flow); without a load it stays closed: b
-    growing there is a sensor drift, the monitor's DISAGREE. Measured with a 5 kN 1 Hz
-    sinusoidal load on C_eq x1.9, D_p x0.85, noise x1.9 (random:200 plant 153): b swung
-    +-150 um (4 sigma) while the truth moved +-106 um around a held estimate (47 kN/mm)."""
+def load_variation(x, lv, alpha_m, alpha_v) -> None:
+    """The pressure difference's mean over 1/alpha_m updates and its variance about that mean
+    over 1/alpha_v (lv: LV_DPM, LV_DPV), read by :func:`load_varying`. A load step's deviation
+    adds at most dp^2 alpha_v/(2 alpha_m) to the variance, 1/16 with the defaults: a 5 kN step,
+    1.94 MPa, reaches 0.49 MPa rms, below the 0.74 MPa friction holds, so neither a held load
+    nor its removal counts as varying."""
     dp = x[2] - x[3]
-    of[OF_DPM] += alpha_m * (dp - of[OF_DPM])
-    of[OF_DPV] += alpha_v * ((dp - of[OF_DPM]) ** 2 - of[OF_DPV])
-    if i_gm < 0 or offset_gate <= 0.0:
-        of[OF_OPEN] = 0.0
-        return False
-    r = x[i_gm] / b_sigma
-    of[OF_B2] += alpha * (r * r - of[OF_B2])
-    is_open = of[OF_B2] > offset_gate * offset_gate and load_varying(of, dp_load)
-    of[OF_OPEN] = 1.0 if is_open else 0.0
-    return is_open
+    lv[LV_DPM] += alpha_m * (dp - lv[LV_DPM])
+    lv[LV_DPV] += alpha_v * ((dp - lv[LV_DPM]) ** 2 - lv[LV_DPV])
 
 
 @njit(cache=True)
-def load_varying(of, dp_load) -> bool:
-    """The pressure difference varies by more than dp_load rms (:func:`offset_noise`'s state,
-    updated whatever its gate): a varying load, :func:`offset_noise`'s domain; a held one is
-    :func:`flow_noise`'s."""
-    return of[OF_DPV] > dp_load * dp_load
+def load_varying(lv, dp_load) -> bool:
+    """The pressure difference varies by more than dp_load rms (:func:`load_variation`): a
+    varying load, under which leakage and compressibility flows the model gets wrong reverse
+    faster than the adaptive states follow (:func:`disagree_noise`'s q_x_offset); a held one
+    is :func:`flow_noise`'s."""
+    return lv[LV_DPV] > dp_load * dp_load
 
 
 @njit(cache=True)

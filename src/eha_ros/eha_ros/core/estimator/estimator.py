@@ -138,12 +138,12 @@ class Estimator:
         self.flow_ticks = round(params[m + 'flow_time'] / self.Ts)
         self.flow_share, self.flow_report = params[m + 'flow_share'], params[m + 'flow_report']
         self.flow_s = np.zeros(adapt.NFLOW)       # adapt.flow_noise's state
-        self.offset_gate, self.q_x_offset = params[m + 'offset_gate'], params[m + 'q_x_offset']
+        self.q_x_offset = params[m + 'q_x_offset']
         t = params[m + 'hold_blend_time']
         self.hold_rate = self.Ts / t if t > 0 else 0.0
-        self.offset_alpha = tuple(self.Ts / params[m + key] for key in (
-            'offset_time', 'offset_load_mean', 'offset_load_time'))
-        self.offset_s = np.zeros(adapt.NOFS)     # adapt.offset_noise's state
+        self.alpha_load = tuple(self.Ts / params[m + key] for key in (
+            'offset_load_mean', 'offset_load_time'))
+        self.load_s = np.zeros(adapt.NLV)         # adapt.load_variation's state
         self.monitor_s = np.zeros(adapt.NMS)
         self.noise_k = self._noise_constants(params, pp) if self.chambers else None
         self.noise_s = np.zeros(noise_level.NNS)
@@ -160,7 +160,7 @@ class Estimator:
         self.E = E = self.kernel[1]
         self.i_gm = int(self.kernel[0]['i_gm'][0])
         self.detector.s, self.monitor_s = E['detector'][0], E['monitor'][0]
-        self.noise_s, self.flow_s, self.offset_s = E['noise'][0], E['flow'][0], E['offset'][0]
+        self.noise_s, self.flow_s, self.load_s = E['noise'][0], E['flow'][0], E['load'][0]
         if self.chambers:
             self.kf.p_last, self.kf.clipped = E['p_last'][0], E['clipped'][0]
             self.kf.fs = E['friction'][0]
@@ -212,7 +212,7 @@ class Estimator:
         self.detector.reset()
         self.monitor_s[:] = 0.0
         self.flow_s[:] = 0.0
-        self.offset_s[:] = 0.0
+        self.load_s[:] = 0.0
         if self.noise_k is not None:
             noise_level.reset(self.noise_k, self.noise_s, self.kf.R, self.kf.R1, self.kf.Q)
 
@@ -315,12 +315,6 @@ class Estimator:
         """|v_f| was above flow_report at the last update (adapt.flow_noise): an unmodelled
         flow, reported as model_mismatch."""
         return bool(self.flow_s[adapt.FL_ACTIVE])
-
-    @property
-    def offset_open(self) -> bool:
-        """The sensor offset was implausible under load at the last update (adapt.offset_noise):
-        the position noise is open part way, reported as model_mismatch."""
-        return bool(self.offset_s[adapt.OF_OPEN])
 
     @property
     def consistency(self) -> int:

@@ -168,15 +168,9 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.flow_report', 'float', 'm/s', 2e-5, 0.0, 1.0,
           doc='|v_f| above this is reported as model_mismatch (a sensor drift under load looks '
               'like a leak): the load-step spec\'s steady error (20 um) per second'),
-    Param(E + 'model.offset_gate', 'float', '', 2.0, 0.0, 1e6,
-          doc='chambers: while the sensor-offset estimate b has a mean square (over offset_time) '
-              'above this^2 x its stationary sigma^2 (at the measured noise level) under a '
-              'varying load, b is the model\'s error: reported as model_mismatch '
-              '(adapt.offset_noise; 0: off)'),
-    Param(E + 'model.offset_time', 'float', 's', 0.5, 0.001, 100.0,
-          doc='time constant of b\'s mean square'),
     Param(E + 'model.offset_load_mean', 'float', 's', 0.25, 0.001, 100.0,
-          doc='time constant of the pressure difference\'s mean ...'),
+          doc='time constant of the pressure difference\'s mean (adapt.load_variation: is the '
+              'load varying? q_x_offset and the flow state ask) ...'),
     Param(E + 'model.offset_load_time', 'float', 's', 2.0, 0.001, 100.0,
           doc='... and of its variance about that mean (a load step adds at most '
               'offset_load_mean/(2 offset_load_time) of its square: a held load is not varying)'),

@@ -52,10 +52,11 @@ CONSTANTS = np.dtype([
     ('i_gm', 'f8'), ('offset_bound', 'f8'), ('i_moved', 'f8'), ('moved_gate', 'f8'),
     ('stribeck', 'f8'), ('friction', 'f8', (adapt.NFK,)),       # adapt.friction_input's
     # the Q schedules: the load state's (adapt.maneuver), the position noise's
-    # (adapt.disagree_noise), the offset's (adapt.offset_noise), the flow's (adapt.flow_noise)
+    # (adapt.disagree_noise, under a varying load: adapt.load_variation), the flow's
+    # (adapt.flow_noise)
     ('i_load', 'f8'), ('q_load', 'f8'), ('q_load_jump', 'f8'), ('load_jump_z', 'f8'),
     ('q_x', 'f8'), ('q_x_disagree', 'f8'), ('position_gm_sigma', 'f8'),
-    ('offset_gate', 'f8'), ('q_x_offset', 'f8'), ('offset_alpha', 'f8', (3,)),
+    ('q_x_offset', 'f8'), ('alpha_load', 'f8', (2,)),
     ('i_flow', 'f8'), ('q_flow', 'f8'), ('flow_gate', 'f8'), ('flow_ticks', 'f8'),
     ('dp_friction', 'f8'), ('flow_share', 'f8'), ('flow_report', 'f8'),
     ('hold_rate', 'f8'),        # per tick: the published position's blend at rest under load
@@ -77,7 +78,7 @@ STATE = np.dtype([
     ('friction', 'f8', (adapt.NFS,)),           # adapt.friction_input's
     ('noise', 'f8', (noise_level.NNS,)),        # noise_level's
     ('flow', 'f8', (adapt.NFLOW,)),             # adapt.flow_noise's
-    ('offset', 'f8', (adapt.NOFS,)),            # adapt.offset_noise's
+    ('load', 'f8', (adapt.NLV,)),               # adapt.load_variation's
     ('monitor', 'f8', (adapt.NMS,)),            # adapt.monitor's
     ('detector', 'f8', (fd.NFS,)),              # fault_detector's
 ])
@@ -130,12 +131,12 @@ def pack(est):
                  'alpha_pressure', 'alpha_friction', 'use_pressure', 'isolate', 'i_load',
                  'q_load', 'q_load_jump', 'load_jump_z', 'q_x', 'q_x_disagree',
                  'position_gm_sigma', 'q_flow', 'flow_gate', 'flow_ticks', 'flow_share',
-                 'flow_report', 'offset_gate', 'q_x_offset', 'offset_alpha', 'hold_rate'):
+                 'flow_report', 'q_x_offset', 'alpha_load', 'hold_rate'):
         k[name] = getattr(est, name)
     k['monitor'], e['monitor'] = est.monitor_k, est.monitor_s
     if est.noise_k is not None:
         k['noise_adapt'], k['noise'] = 1.0, est.noise_k
-    e['noise'], e['flow'], e['offset'] = est.noise_s, est.flow_s, est.offset_s
+    e['noise'], e['flow'], e['load'] = est.noise_s, est.flow_s, est.load_s
     k['detector'], e['detector'] = d.k, d.s
     return K, E, arrays
 
@@ -327,13 +328,12 @@ def consistency(K, E, a, position) -> int:
     x, Q = a.x, a.Q
     code = int(e.detector[fd.FS_CODE])
     flow = e.flow[adapt.FL_ACTIVE] > 0.5
-    offset = e.offset[adapt.OF_OPEN] > 0.5
-    v = adapt.monitor(k.monitor, e.monitor, position, x[0], code,
-                      code == fd.DRIFT or flow or offset, int(e.edge))
+    v = adapt.monitor(k.monitor, e.monitor, position, x[0], code, code == fd.DRIFT or flow,
+                      int(e.edge))
     if k.chambers > 0.5:
         adapt.disagree_noise(Q, x, int(k.i_gm), k.position_gm_sigma, k.monitor, e.monitor,
                              int(e.edge), k.q_x, k.q_x_disagree,
-                             adapt.load_varying(e.offset, k.dp_friction), k.q_x_offset)
+                             adapt.load_varying(e.load, k.dp_friction), k.q_x_offset)
     return v
 
 
@@ -384,11 +384,9 @@ def estimate(K, E, a, position, w, pa, pb):
         adapt.maneuver(Q, int(k.i_load), pz, k.load_jump_z,
                        k.q_load + e.friction[adapt.FS_Q], k.q_load_jump)
         b_sigma = k.position_gm_sigma * e.noise[noise_level.NS_SX]
-        of = e.offset
-        adapt.offset_noise(x, int(k.i_gm), b_sigma, of, k.offset_alpha[0], k.offset_alpha[1],
-                           k.offset_alpha[2], k.offset_gate, k.dp_friction)
+        adapt.load_variation(x, e.load, k.alpha_load[0], k.alpha_load[1])
         rest = (k.stribeck > 0.5 and e.friction[adapt.FS_N] >= k.friction[adapt.FK_NREST]
-                and not adapt.load_varying(of, k.dp_friction))
+                and not adapt.load_varying(e.load, k.dp_friction))
         # at rest under a held load (beyond what friction holds): publish x_hat + b
         r = k.hold_rate if rest and abs(x[2] - x[3]) > k.dp_friction else -k.hold_rate
         e.hold_weight = min(1.0, max(0.0, e.hold_weight + r))

@@ -28,7 +28,6 @@ STAGES = {
     'flow_state': {'estimator.model.flow_state': False},         # unmodelled flow v_f
     'stribeck_friction': {'estimator.model.friction': 'eq4_36'},  # the thesis' eq. 4.36 instead
     'noise_level': {'estimator.noise.adapt': False},             # measured sensor noise level
-    'offset_noise': {'estimator.model.offset_gate': 0.0},        # Q schedule under varying load
     'hold_blend': {'estimator.model.hold_blend_time': 0.0},      # x_hat + b at rest under load
     'isolate': {'estimator.fault.isolate': False},               # predict only on a sensor fault
 }
