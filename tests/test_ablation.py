@@ -24,7 +24,7 @@ def test_scenario_files_carry_the_stage_overrides(tmp_path):
     for name, path in zip(['step', 'load_step'], paths):
         scn = SC.load(path)
         assert scn.name == name
-        assert scn.overrides['estimator:estimator.model.load_state'] is False
+        assert 'load_state' not in scn.overrides['estimator:estimator.stages']
         base = SC.load(name)
         assert scn.params == base.params and scn.specs == base.specs
         assert set(base.overrides) <= set(scn.overrides)
@@ -34,10 +34,10 @@ def test_scenario_files_carry_the_stage_overrides(tmp_path):
 
 def test_a_scenario_that_sets_the_stage_key_itself_is_refused(tmp_path):
     doc = {k: v for k, v in SC.load('step').as_dict().items() if k != 'duration'}
-    doc['overrides'] = {'estimator:estimator.model.load_state': True}
+    doc['overrides'] = {'estimator:estimator.stages': ['load_state']}
     path = tmp_path / 'mine.yaml'
     path.write_text(yaml.safe_dump(doc))
-    with pytest.raises(UsageError, match='load_state'):
+    with pytest.raises(UsageError, match='estimator.stages'):
         A.scenario_files([str(path)], 'load_state', str(tmp_path / 'out'))
 
 
@@ -87,5 +87,5 @@ def test_ablation_runs_end_to_end(tmp_path):
     steady = cell['specs']['steady_error_m']
     assert steady['worse'] and steady['change'] > 0.5, steady
     info = json.loads((out / 'load_state' / 'load_step-seed3' / 'campaign.json').read_text())
-    assert info['scenario']['overrides']['estimator:estimator.model.load_state'] is False
+    assert 'load_state' not in info['scenario']['overrides']['estimator:estimator.stages']
     assert os.path.isfile(out / 'ablation.md')

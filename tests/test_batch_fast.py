@@ -105,8 +105,7 @@ def test_batch_stack_run_equals_ticks():
 @pytest.mark.parametrize('over', [{'estimator.filter': 'pva'},
                                   {'estimator.measurements': 'position'},
                                   {'estimator.model.structure': 'eq4_35'},
-                                  {'estimator.model.friction_pressure': True,
-                                   'estimator.fault.isolate': True}])
+                                  {'estimator.model.friction_pressure': True}])
 def test_estimator_variants_bit_identical(over):
     """PVA filter, position-only model KF, and a fault-isolating estimator (predict-only
     ticks after the load step's innovation jump: Python ticks) through BatchStack."""

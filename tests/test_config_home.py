@@ -110,6 +110,12 @@ CASES = {
                                         [f'estimator.{k} = 400.0', 'plant.sim.Ts = 0.002'])
        for k in ('model.friction_lowpass', 'model.pressure_lowpass', 'model.compliance_lowpass',
                  'monitor.lowpass')},
+    'estimator unknown stage': ('estimator', {f'{E}stages': ['load_state', 'kalman_magic']},
+                                ["estimator.stages: unknown stage 'kalman_magic'",
+                                 'sensor_offset']),
+    'estimator noise-free sensor model': (
+        'estimator', {'/**:plant.sensors.position_sigma': 0.0},
+        ['plant.sensors.position_sigma = 0.0', 'plant.sensors.noise = false']),
     'switch_manager drive clear > trip': (
         'switch_manager', {f'{H}drive.trip': 0.3, f'{H}drive.clear': 0.6},
         ['switch.health.drive.clear = 0.6', 'switch.health.drive.trip (0.3)']),

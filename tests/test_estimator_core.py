@@ -8,6 +8,7 @@ import pytest
 
 from eha_ros.core.config.params import ParamError, load
 from eha_ros.core.estimator import kernels
+from eha_ros.core.estimator.params import without
 from eha_ros.core.sim import pid_loop as batch
 from eha_ros.core.estimator.chinniah import (ALPHA_TABLE_4_1, Chinniah3, ChinniahEstimator,
                                              ChinniahJoint, simulate_rig)
@@ -74,14 +75,20 @@ def test_friction_estimate_eq_4_36_opposes_motion_and_is_continuous(params):
 
 
 # ---------------------------------------------------------------- Joseph form vs filterpy
+@pytest.mark.parametrize('stages', ['default', 'none'])
 @pytest.mark.parametrize('measurements', ['position', 'position_pressure'])
-def test_filter_matches_filterpy_joseph_form(params, measurements):
+def test_filter_matches_filterpy_joseph_form(params, measurements, stages):
+    """The eq4_35 structure against filterpy; with no stage (estimator.stages ['']) it is the
+    filter of eq. 4.35 itself: the states x, xdot, p_D and nothing else."""
     from filterpy.kalman import KalmanFilter
     p = dict(params)
     p['estimator.measurements'] = measurements
     p['estimator.model.structure'] = 'eq4_35'
+    if stages == 'none':
+        p['estimator.stages'] = ['']
     est = Estimator(p)
     kf = est.kf
+    assert (kf.n == 3) == (stages == 'none')
     f = KalmanFilter(dim_x=kf.n, dim_z=kf.H.shape[0], dim_u=2)
     f.F, f.B, f.Q, f.H, f.R = kf.F, kf.G, kf.Q, kf.H, kf.R
     f.P, f.x = kf.P.copy(), kf.x.copy()
@@ -114,10 +121,10 @@ def test_chamber_filter_matches_filterpy_joseph_form(params, measurements):
     from filterpy.kalman import KalmanFilter
     p = dict(params)
     p['estimator.measurements'] = measurements
-    for k in ('leakage', 'displacement', 'compliance', 'friction'):   # the plain KF (adaptive
-        p[f'estimator.model.adapt_{k}'] = False               # EKF: test_estimator_robust.py)
-    p['estimator.model.offset_bound'] = 0.0                   # and no projection
-    p['estimator.model.flow_state'] = False                   # nor the unmodelled flow
+    p = without(p, *(f'adapt_{k}' for k in ('leakage', 'displacement', 'compliance',
+                                             'friction')))    # the plain KF (adaptive EKF:
+    p['estimator.model.offset_bound'] = 0.0                   # test_estimator_robust.py), no
+    p = without(p, 'flow_state')                              # projection, no unmodelled flow
     kf = Estimator(p).kf
     assert isinstance(kf, ChamberKF)
     kf.set_moved_gate(-1, 0.0)                               # and no gated offset
@@ -232,7 +239,7 @@ def test_mean_nis_in_motion_position_only(params):
 # ---------------------------------------------------------------- rejection and stale
 def test_nan_and_out_of_range_position_predict_only_and_counted(params):
     p = dict(params)
-    p['estimator.fault.isolate'] = False      # the constant reading below is a stuck sensor
+    p = without(p, 'isolate')                 # the constant reading below is a stuck sensor
     est = Estimator(p)
     w = np.array([10.0, 0.0])
     r = est.update(0.0, w, 1e6, 1e6, 0)
@@ -386,9 +393,8 @@ def _open_loop_model_error(params, structure):
     from eha_ros.core.controller.pid import PID
     from eha_ros.core.plant import EhaPlant
     p = dict(params)
-    p.update({'plant.sensors.noise': False, 'estimator.model.structure': structure,
-              'estimator.model.load_state': False, 'estimator.model.sensor_gm': False,
-              'estimator.model.leak_state': False})
+    p.update({'plant.sensors.noise': False, 'estimator.model.structure': structure})
+    p = without(p, 'load_state', 'sensor_offset', 'leak_state')
     kf = build_filter(p)
     plant, pid = EhaPlant(p, seed=1), PID.table_3_8(1e-3)
     u, err = 0.0, []

@@ -16,17 +16,20 @@ DERIVED = {
     'alpha_pressure': 'model.pressure_lowpass', 'alpha_friction': 'model.friction_lowpass',
     'alpha_compliance': 'model.compliance_lowpass', 'A_p': 'plant', 'D_p': 'plant',
     'p_c': 'plant', 'C_x': 'plant', 'C_r': 'plant', 'p_acc': 'plant', 'c_Ts': 'plant, Ts',
-    'i_leak': 'model.leak_state', 'i_leakage': 'model.adapt_leakage',
-    'i_displacement': 'model.adapt_displacement', 'i_compliance': 'model.adapt_compliance',
-    'i_friction': 'model.adapt_friction', 'i_external_leakage': 'model.adapt_external_leakage',
-    'i_frozen': 'the first adaptive state', 'i_gm': 'model.sensor_gm', 'i_load':
-    'model.load_state', 'i_flow': 'model.flow_state', 'i_moved': 'model.sensor_gm',
-    'moved_gate': 'model.load_jump_z', 'stribeck': 'model.friction',
+    'i_leak': 'stages: leak_state', 'i_leakage': 'stages: adapt_leakage',
+    'i_displacement': 'stages: adapt_displacement', 'i_compliance': 'stages: adapt_compliance',
+    'i_friction': 'stages: adapt_friction', 'i_external_leakage': 'stages: '
+    'adapt_external_leakage', 'i_frozen': 'the first adaptive state',
+    'i_gm': 'stages: sensor_offset', 'i_load': 'stages: load_state', 'i_flow': 'stages: '
+    'flow_state', 'i_moved': 'stages: sensor_offset', 'moved_gate': 'model.load_jump_z',
+    'stribeck': 'stages: stribeck_friction', 'isolate': 'stages: isolate',
+    'position_gm_sigma': 'plant.sensors.position_gm_sigma',
     'friction': 'model.friction_* and the plant (adapt.friction_input)', 'q_x': 'model.q[0]',
     'flow_ticks': 'model.flow_time / Ts', 'dp_friction': 'plant friction, friction_range',
     'alpha_load': 'model.offset_load_mean, offset_load_time',
-    'hold_rate': 'Ts / model.hold_blend_time', 'noise_adapt': 'noise.adapt',
-    'noise': 'noise.* (noise_level.constants)', 'monitor': 'monitor.*',
+    'hold_rate': 'Ts / model.hold_blend_time (stages: hold_blend)',
+    'noise_adapt': 'stages: noise_level',
+    'noise': 'noise.*, plant.sensors.* (noise_level.constants)', 'monitor': 'monitor.*',
     'detector': 'fault.* (fault_detector)',
 }
 

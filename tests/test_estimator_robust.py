@@ -16,6 +16,7 @@ from eha_ros.core.sim.batch import BatchStack, node_params
 from eha_ros.core.sim.closed_loop import R_FAULT, R_U, R_X, R_XHAT, R_XM
 from eha_ros.core.estimator import adapt, tuning
 from eha_ros.core.estimator import fault_detector as fd
+from eha_ros.core.estimator.params import without
 from eha_ros.core.estimator.chamber_kf import ChamberKF, continuous, leak_sensitivity
 from eha_ros.core.estimator.estimator import Estimator
 from eha_ros.core.hardware.sim_params import SCHEMA as SIM
@@ -176,7 +177,7 @@ def test_unmodelled_flow_holds_a_leak_the_adaptive_states_cannot_split():
                noise=1.050, leak_split=1.848)
     scn = scenarios.load('load_step')
     with_flow = scenarios.run(scn, nominal, row, 1, trace=False)[0]['steady_error_truth_m']
-    nominal['estimator'] = dict(nominal['estimator'], **{'estimator.model.flow_state': False})
+    nominal['estimator'] = without(nominal['estimator'], 'flow_state')
     without = scenarios.run(scn, nominal, row, 1, trace=False)[0]['steady_error_truth_m']
     print(f'\nsteady error with the flow state {with_flow * 1e6:.1f} um, '
           f'without {without * 1e6:.1f} um')

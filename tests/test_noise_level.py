@@ -8,6 +8,7 @@ import pytest
 
 from eha_ros.core.estimator import noise_level as NL
 from eha_ros.core.estimator.estimator import Estimator
+from eha_ros.core.estimator.params import without
 from eha_ros.core.sim import campaign, scenarios
 
 TS = 1e-3
@@ -84,7 +85,7 @@ def test_estimator_resets_to_the_datasheet_level(params):
     assert est.kf.R[0, 0] == pytest.approx(4 * R0[0, 0])
     est.reset()
     assert np.array_equal(est.kf.R, R0) and np.array_equal(est.kf.Q, Q0)
-    off = Estimator(dict(params, **{'estimator.noise.adapt': False}))
+    off = Estimator(without(params, 'noise_level'))
     assert off.noise_k is None
 
 
@@ -97,7 +98,8 @@ NOISY_LEAKY = dict(C_eq=12.818, D_p=0.8566, beta=0.9684, k_T=0.8301, k_E=0.9667,
 @pytest.mark.parametrize('adapt', [True, False])
 def test_noisy_sensors_on_a_leaky_plant_keep_the_sine_ratio(adapt):
     nominal = campaign.nominal_params()
-    nominal['estimator']['estimator.noise.adapt'] = adapt
+    if not adapt:
+        nominal['estimator'] = without(nominal['estimator'], 'noise_level')
     figs, _ = scenarios.run(scenarios.load('sine'), nominal, NOISY_LEAKY, 1, trace=False)
     if adapt:
         assert figs['rmse_ratio'] <= 0.5            # issue 15: every plant

@@ -8,7 +8,8 @@ import sys
 from ..core.config.cli import guarded
 
 EPILOG = """\
-stages (core/sim/ablation.py STAGES: the estimator.* overrides that switch each one off):
+stages (each switched off by leaving it out of estimator.stages; docs/parameters.md says what
+each one adds to the Kalman filter of eq. 4.35):
 {stages}
 Runs the scenarios with every stage on (all_on), then with each stage off, on the same family
 and seeds: one campaign set per stage under --out/<stage>/ (its scenarios/ folder holds the
@@ -30,8 +31,7 @@ def main(argv=None) -> int:
         description='Switch the estimator\'s stages off one at a time and measure what each '
                     'one is worth over the campaigns (issue 44).',
         epilog=EPILOG.format(
-            stages='\n'.join(f'  {k:24s}{", ".join(f"{a}={b}" for a, b in v.items())}'
-                             for k, v in A.STAGES.items()),
+            stages='\n'.join(f'  {k}' for k in A.STAGES),
             scenarios=', '.join(A.SCENARIOS)))
     ap.add_argument('scenario', nargs='*', help=f'scenario name(s) or YAML path(s) (default: '
                                                 f'{", ".join(A.SCENARIOS)})')

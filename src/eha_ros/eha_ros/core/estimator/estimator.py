@@ -26,6 +26,7 @@ from . import noise_level
 from . import stepper
 from .chamber_kf import ChamberKF
 from .model_kf import ModelKF
+from .params import DRIFTING, on
 from .pva import PvaKF
 
 
@@ -54,8 +55,9 @@ def build_filter(p: dict):
     e = 'estimator.'
     if p[e + 'filter'] == 'pva':
         return PvaKF(pp.Ts, p[e + 'pva.W'], p[e + 'pva.R'], p[e + 'pva.p0'])
-    sig, gm_sig = p[e + 'noise.position_sigma'], p[e + 'noise.position_gm_sigma']
-    gm = (gm_sig, p[e + 'noise.position_gm_corner']) if p[e + 'model.sensor_gm'] else None
+    s = 'plant.sensors.'                      # the sensor model: R and the offset state
+    sig, gm_sig = p[s + 'position_sigma'], p[s + 'position_gm_sigma']
+    gm = (gm_sig, p[s + 'position_gm_corner']) if on(p, 'sensor_offset') else None
     R_pos = sig ** 2 if gm else sig ** 2 + gm_sig ** 2
     with_p = p[e + 'measurements'] == 'position_pressure'
     if p[e + 'model.structure'] == 'chambers':
@@ -63,38 +65,39 @@ def build_filter(p: dict):
         m = e + 'model.'
         # the adaptive flow parameters need the measured pressures (the flow balance): none
         # with position-only measurements, where they are unobservable
-        lam, dlt, kap, phi, eps = (((p[m + 'q_' + k], p[m + 'p0_' + k], *p[m + k + '_range'])
-                                    if p[m + 'adapt_' + k] and with_p else None)
+        lam, dlt, kap, phi, eps = (((p[m + 'q_' + k] if k in DRIFTING else 0.0,
+                                     p[m + 'p0_' + k], *p[m + k + '_range'])
+                                    if on(p, 'adapt_' + k) and with_p else None)
                                    for k in ('leakage', 'displacement', 'compliance', 'friction',
                                              'external_leakage'))
         fric = None
-        if p[m + 'friction'] == 'stribeck':     # the plant's curve; none without Coulomb part
-            on = pp.friction_model == 'stribeck'
-            fric = (pp.F_c if on else 0.0, pp.F_s if on else 0.0, pp.v_s,
+        if on(p, 'stribeck_friction'):     # the plant's curve; none without Coulomb part
+            coulomb = pp.friction_model == 'stribeck'
+            fric = (pp.F_c if coulomb else 0.0, pp.F_s if coulomb else 0.0, pp.v_s,
                     adapt.lowpass_alpha(p[m + 'friction_lowpass'], pp.Ts), p[m + 'rest_velocity'],
                     round(p[m + 'rest_time'] / pp.Ts), p[m + 'q_load_rest'])
         kf = ChamberKF(circuit(pp), pp.Ts, q, p[e + 'model.p0'], R_pos,
-                       p[e + 'noise.pressure_sigma'] ** 2 if with_p else None, gm,
+                       p[s + 'pressure_sigma'] ** 2 if with_p else None, gm,
                        F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
-                       q_load=p[e + 'model.q_load'] if p[e + 'model.load_state'] else None,
+                       q_load=p[e + 'model.q_load'] if on(p, 'load_state') else None,
                        p0_load=p[e + 'model.p0_load'], leakage=lam, displacement=dlt,
                        compliance=kap, adapt_gate=p[m + 'adapt_gate'],
                        leakage_excitation=p[m + 'leakage_excitation'],
                        compliance_alpha=adapt.lowpass_alpha(p[m + 'compliance_lowpass'], pp.Ts),
                        offset_bound=p[m + 'offset_bound'] if gm else 0.0,
                        friction=fric, friction_scale=phi, external=eps,
-                       flow=p[m + 'flow_state'] and with_p)
+                       flow=on(p, 'flow_state') and with_p)
         kf.friction_uses_pressure = p[e + 'model.friction_pressure']
         if gm and with_p:       # a load step moves the piston, the sensor offset stays
             kf.set_moved_gate(kf.i_gm, p[m + 'load_jump_z'])
         return kf
     h = hydromech(pp, p[e + 'model.pd_leakage'])
-    R_pd = 2.0 * p[e + 'noise.pressure_sigma'] ** 2 if with_p else None
+    R_pd = 2.0 * p[s + 'pressure_sigma'] ** 2 if with_p else None
     kf = ModelKF(h, pp.Ts, p[e + 'model.q'], p[e + 'model.p0'], R_pos, R_pd, gm,
                  F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
-                 q_leak=p[e + 'model.q_leak'] if p[e + 'model.leak_state'] else None,
+                 q_leak=p[e + 'model.q_leak'] if on(p, 'leak_state') else None,
                  p0_leak=p[e + 'model.p0_leak'],
-                 q_load=p[e + 'model.q_load'] if p[e + 'model.load_state'] else None,
+                 q_load=p[e + 'model.q_load'] if on(p, 'load_state') else None,
                  p0_load=p[e + 'model.p0_load'])
     kf.friction_uses_pressure = p[e + 'model.friction_pressure']
     return kf
@@ -118,7 +121,7 @@ class Estimator:
         self.pressure_min = params[e + 'validity.pressure_min']
         self.pressure_max = params[e + 'validity.pressure_max']
         self.max_abs_motor_speed = params[e + 'validity.max_abs_motor_speed']
-        self.isolate = params[e + 'fault.isolate']
+        self.isolate = on(params, 'isolate')
         self.alpha_pressure = adapt.lowpass_alpha(params[e + 'model.pressure_lowpass'], self.Ts)
         self.alpha_friction = adapt.lowpass_alpha(params[e + 'model.friction_lowpass'], self.Ts)
         self.detector = fd.FaultDetector.from_params(params, self.Ts)
@@ -126,21 +129,21 @@ class Estimator:
         mk[adapt.MK_ALPHA] = adapt.lowpass_alpha(params[e + 'monitor.lowpass'], self.Ts)
         mk[adapt.MK_BAND] = params[e + 'monitor.band']
         mk[adapt.MK_N] = params[e + 'monitor.debounce']
-        mk[adapt.MK_HOLD] = int(round(params[e + 'monitor.hold_time'] / self.Ts))
+        mk[adapt.MK_HOLD] = int(round(params[e + 'hold_time'] / self.Ts))
         self.monitor_k = mk
         m = e + 'model.'
         self.i_load = -1 if not self.is_model or self.kf.i_load is None else self.kf.i_load
         self.q_load, self.q_load_jump = params[m + 'q_load'], params[m + 'q_load_jump']
         self.load_jump_z = params[m + 'load_jump_z']
         self.q_x, self.q_x_disagree = params[m + 'q'][0], params[m + 'q_x_disagree']
-        self.position_gm_sigma = params[e + 'noise.position_gm_sigma']
+        self.position_gm_sigma = params['plant.sensors.position_gm_sigma']
         self.q_flow, self.flow_gate = params[m + 'q_flow'], params[m + 'flow_gate']
         self.flow_ticks = round(params[m + 'flow_time'] / self.Ts)
         self.flow_share, self.flow_report = params[m + 'flow_share'], params[m + 'flow_report']
         self.flow_s = np.zeros(adapt.NFLOW)       # adapt.flow_noise's state
         self.q_x_offset = params[m + 'q_x_offset']
-        t = params[m + 'hold_blend_time']
-        self.hold_rate = self.Ts / t if t > 0 else 0.0
+        self.hold_rate = (self.Ts / params[m + 'hold_blend_time'] if on(params, 'hold_blend')
+                          else 0.0)
         self.alpha_load = tuple(self.Ts / params[m + key] for key in (
             'offset_load_mean', 'offset_load_time'))
         self.load_s = np.zeros(adapt.NLV)         # adapt.load_variation's state
@@ -175,14 +178,14 @@ class Estimator:
 
     def _noise_constants(self, p: dict, pp):
         """noise_level constants from the filter's sensor model, None when not adapting."""
-        e, kf = 'estimator.noise.', self.kf
-        if not p[e + 'adapt']:
+        e, s, kf = 'estimator.noise.', 'plant.sensors.', self.kf
+        if not on(p, 'noise_level'):
             return None
-        sig, gm_sig = p[e + 'position_sigma'], p[e + 'position_gm_sigma']
-        a = math.exp(-2.0 * math.pi * p[e + 'position_gm_corner'] * self.Ts)
+        sig, gm_sig = p[s + 'position_sigma'], p[s + 'position_gm_sigma']
+        a = math.exp(-2.0 * math.pi * p[s + 'position_gm_corner'] * self.Ts)
         with_gm = kf.i_gm >= 0
         d_x = noise_level.second_difference_power(sig, gm_sig, a, pp.position_resolution)
-        d_p = noise_level.second_difference_power(p[e + 'pressure_sigma'], 0.0, 0.0, 0.0)
+        d_p = noise_level.second_difference_power(p[s + 'pressure_sigma'], 0.0, 0.0, 0.0)
         lo, hi = p[e + 'adapt_range'][:2]
         return noise_level.constants(
             self.Ts, p[e + 'adapt_time'], lo, hi, d_x, d_p, kf.R[0, 0],

@@ -155,7 +155,7 @@ class FaultDetector:
         f = 'estimator.fault.'
         return cls(Ts, p[f + 'jump_threshold'], p[f + 'jump_debounce'], p[f + 'stuck_samples'],
                    p[f + 'stuck_tolerance'], p[f + 'drift_k'], p[f + 'drift_h'],
-                   p[f + 'drift_debounce'], p[f + 'hold_time'], p[f + 'jump_step'],
+                   p[f + 'drift_debounce'], p['estimator.hold_time'], p[f + 'jump_step'],
                    p[f + 'jump_pressure_veto'])
 
     def reset(self):

@@ -19,10 +19,10 @@ filter's own xdot and p_D states, held over Ts, is an explicit feedback A_p p_D[
 the raw sensor's); a hard sign kicked the p_D state at every reversal.
 
 Optional states beyond eq. 4.35 (see :class:`ModelKF`): the position sensor's low-frequency
-Gauss-Markov component b (thesis Fig. 4.6, estimator.model.sensor_gm), b' = -2 pi f_c b + w,
+Gauss-Markov component b (thesis Fig. 4.6, stage sensor_offset), b' = -2 pi f_c b + w,
 measured as z = x + b + v, so that the filter leans on the motor-speed model at low frequency
 instead of following the sensor's slow wander; and a leakage-coefficient correction dC
-(estimator.model.leak_state).
+(stage leak_state).
 """
 from __future__ import annotations
 

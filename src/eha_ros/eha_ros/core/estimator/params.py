@@ -20,13 +20,11 @@ TUNED = {
     'model.q_external_leakage': 6.2362e-09,
     'model.external_leakage_range': [-0.99, 36.5],
     'model.p0_displacement': 0.003331,
-    'model.q_displacement': 0.0,
     'model.displacement_range': [-0.325, 0.125],
     'model.p0_compliance': 0.04218,
     'model.q_compliance': 4.2185e-11,
     'model.compliance_range': [-0.5833, 0.9167],
     'model.p0_friction': 0.1818,
-    'model.q_friction': 0.0,
     'model.friction_range': [-0.875, 1.375],
     'model.leakage_excitation': 0.0,
     'model.offset_bound': 0.0002532,
@@ -37,24 +35,88 @@ TUNED = {
 # END tune_estimator
 
 
-def _adaptive(name, symbol, adapt_doc, q_max, p0_max, lo, hi) -> list:
-    """The four parameters of one adaptive model state (core.estimator.adapt): its switch
-    adapt_<name>, random walk q_<name>, initial variance p0_<name> and projection range
+# the adaptive states whose parameters drift in service (viscosity, air, temperature move both
+# leakage paths and the bulk modulus): a random walk q_<name>; the displacement is geometry and
+# the friction Table 3.7's, constant for a plant (no random walk: core.estimator.tuning)
+DRIFTING = ('leakage', 'external_leakage', 'compliance')
+
+
+def _adaptive(name, symbol, q_max, p0_max, lo, hi) -> list:
+    """The parameters of the adaptive model state of stage adapt_<name> (core.estimator.adapt):
+    random walk q_<name> (a DRIFTING one only), initial variance p0_<name> and projection range
     (defaults: TUNED)."""
     m = E + 'model.'
-    return [Param(m + f'adapt_{name}', 'bool', '', True, doc=adapt_doc),
-            Param(m + f'q_{name}', 'float', '', TUNED[f'model.q_{name}'], 0.0, q_max,
-                  doc=f'per-step random-walk variance of {symbol}'),
+    walk = [Param(m + f'q_{name}', 'float', '', TUNED[f'model.q_{name}'], 0.0, q_max,
+                  doc=f'per-step random-walk variance of {symbol}')] if name in DRIFTING else []
+    return [*walk,
             Param(m + f'p0_{name}', 'float', '', TUNED[f'model.p0_{name}'], 0.0, p0_max,
                   doc=f'initial variance of {symbol} (family spread)'),
             Param(m + f'{name}_range', 'float[]', '', TUNED[f'model.{name}_range'], lo, hi,
                   min_len=2, doc=f'projection range of {symbol} [lo, hi]')]
 
 
+# The stages the estimator adds to the Kalman filter of eq. 4.35 (docs/nodes/estimator.md), in
+# the order they run; estimator.stages lists the ones that run (all by default): name -> what
+# it adds. "chambers": the chamber-pressure structure only.
+STAGES = {
+    'sensor_offset': "the position sensor's low-frequency (Gauss-Markov) offset b as a state "
+                     "(coloured noise, Fig. 4.6)",
+    'load_state': 'an external-force state (random walk): a static load balances the measured '
+                  'pressures instead of biasing x (23 kN: 26 um vs 251 um without)',
+    'leak_state': 'eq4_35 structure only: a leakage-coefficient correction state (1e-12 m^3/(s '
+                  'Pa) units): the boost check valves make C_eff != C_eq',
+    'adapt_leakage': 'chambers: relative leakage correction lambda as a state (C_p + C_c x '
+                     '(1+lambda); every leakage without adapt_external_leakage)',
+    'adapt_external_leakage': 'chambers: relative correction epsilon of the per-port leakage '
+                              'C_r as a state (C_r x (1+epsilon)); lambda then scales the '
+                              'cross-port C_p + C_c only',
+    'adapt_displacement': 'chambers: relative displacement correction delta as a state (D_p x '
+                          '(1+delta))',
+    'adapt_compliance': 'chambers: relative compliance correction kappa as a state (V_d/beta x '
+                        '(1+kappa))',
+    'adapt_friction': 'chambers with stribeck_friction: relative friction correction phi as a '
+                      'state (F_c, F_s x (1+phi))',
+    'flow_state': 'chambers with stribeck_friction: an unmodelled flow v_f (velocity units, A_p '
+                  'v_f into A, out of B) as a state, opened at rest while the sensor offset is '
+                  'implausible, bounded by the leakage of the pressure difference beyond '
+                  'friction (adapt.flow_noise): a persistent velocity bias at rest is not a '
+                  'sensor offset (issue 15)',
+    'stribeck_friction': 'chambers: the piston friction of the model is the plant curve of eq. '
+                         '3.33 (plant.friction F_c, F_s, v_s; Table 3.7) at the pump-flow '
+                         'velocity, low-passed at friction_lowpass (adapt.friction_input); '
+                         'without it (and in the eq4_35 structure) eq. 4.36: -sign(xdot) '
+                         'min(|p_D A_p|, F_s) with F_s, v_eps',
+    'noise_level': "chambers: measure the position and pressure sensors' noise level online "
+                   "and scale R (and the Gauss-Markov state's q) by it (second differences of "
+                   "its readings; core.estimator.noise_level, issue 15)",
+    'hold_blend': 'while the piston rests under a held load, publish the sensor reading '
+                  'without its white noise, x_hat + b (model.hold_blend_time)',
+    'isolate': 'skip the position update (predict only, adapted model) while a sensor fault '
+               '(jump or stuck) is reported',
+}
+
+
+def on(p: dict, stage: str) -> bool:
+    """Whether ``stage`` (a key of :data:`STAGES`) runs with parameters ``p``."""
+    return stage in p[E + 'stages']
+
+
+def without(p: dict, *stages: str) -> dict:
+    """A copy of the parameters ``p`` with ``stages`` switched off."""
+    left = [s for s in p[E + 'stages'] if s not in stages]
+    return {**p, E + 'stages': left or ['']}
+
+
 ESTIMATOR = Schema('estimator', [
     Param(E + 'filter', 'str', '', 'model', choices=('model', 'pva'),
           doc='model = eq. 4.35 model-based KF; pva = position-velocity-acceleration KF '
               '(eqs. 4.30-4.34)'),
+    Param(E + 'stages', 'str[]', '', list(STAGES), min_len=1,
+          doc='the stages that run beyond the Kalman filter of eq. 4.35, any of: ' + '; '.join(
+              f'{k} = {v}' for k, v in STAGES.items()) + ". [''] = none: the filter alone"),
+    Param(E + 'hold_time', 'float', 's', 0.5, 0.0, 100.0,
+          doc='a consistency verdict (monitor) or a detected sensor fault (fault) stays '
+              'reported this long after its condition clears'),
     Param(E + 'measurements', 'str', '', 'position_pressure',
           choices=('position', 'position_pressure'),
           doc='model KF measurement set: position, or position and the pressures (p_A, p_B '
@@ -66,24 +128,19 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.pd_leakage', 'str', '', 'eq3_22', choices=('boost', 'eq3_22', 'eq4_35'),
           doc='eq4_35 structure only: p_D leakage: boost = 2 (C_p+C_c+C_r) beta/V_d, '
               'eq3_22 = 2 C_eq beta/V_d (as the plant), eq4_35 = C_eq beta/V_d (as printed)'),
-    Param(E + 'model.friction', 'str', '', 'stribeck', choices=('stribeck', 'eq4_36'),
-          doc='chambers: piston friction of the model: stribeck = the plant curve of eq. 3.33 '
-              '(plant.friction F_c, F_s, v_s; Table 3.7) at the pump-flow velocity, low-passed '
-              'at friction_lowpass (adapt.friction_input); eq4_36 = -sign(xdot) min(|p_D A_p|, '
-              'F_s) with F_s, v_eps below (eq4_35 structure: always)'),
     Param(E + 'model.rest_velocity', 'float', 'm/s', 3e-3, 0.0, 1.0,
-          doc='stribeck: the piston is at rest while the pump-flow velocity stays below this '
+          doc='stribeck_friction: the piston is at rest while the pump-flow velocity stays below this '
               'for rest_time (stiction: the friction is whatever holds it)'),
     Param(E + 'model.rest_time', 'float', 's', 0.1, 0.0, 100.0,
-          doc='stribeck: how long the pump-flow velocity stays below rest_velocity before the '
+          doc='stribeck_friction: how long the pump-flow velocity stays below rest_velocity before the '
               'piston counts as at rest (stiction)'),
     Param(E + 'model.q_load_rest', 'float', 'N^2', 1000.0, 0.0, 1e12,
-          doc='stribeck: per-step variance added to the force state\'s random walk while the '
+          doc='stribeck_friction: per-step variance added to the force state\'s random walk while the '
               'piston is at rest (stiction: the holding force is whatever holds it; the friction '
               'input is held). Campaigns over the family tried 1e2, 1e3, 3e3, 1e4: above 1e3 '
               'a 1 mm sensor bias at rest is no longer told from motion'),
     Param(E + 'model.F_s', 'float', 'N', 800.0, 0.0, 1.0e5,
-          doc='friction bound of eq. 4.36 (thesis: 800 N; friction: eq4_36 only)'),
+          doc='friction bound of eq. 4.36 (thesis: 800 N; without stribeck_friction only)'),
     Param(E + 'model.v_eps', 'float', 'm/s', 1.0e-2, 1.0e-6, 0.1,
           doc='pump-flow velocity D_p w/A_p over which eq. 4.36 friction reaches full sign '
               '(choice)'),
@@ -96,12 +153,6 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.pressure_lowpass', 'float', 'Hz', 30.0, 0.1, 500.0,
           doc='low-pass of the measured p_D used as a model input (friction, leakage column; '
               'choice)'),
-    Param(E + 'model.sensor_gm', 'bool', '', True,
-          doc='add the position sensor\'s low-frequency Gauss-Markov offset as a state '
-              '(coloured noise, Fig. 4.6)'),
-    Param(E + 'model.leak_state', 'bool', '', True,
-          doc='eq4_35 structure only: add a leakage-coefficient correction state '
-              '(1e-12 m^3/(s Pa) units): the boost check valves make C_eff != C_eq'),
     Param(E + 'model.q', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-16, 1e-10, 1e6], 0.0, 1e20,
           min_len=3, doc='per-step process noise variances of x, xdot, p_D (p_D: eq4_35 only; '
                          'tuned, SIL)'),
@@ -114,12 +165,9 @@ ESTIMATOR = Schema('estimator', [
           doc='per-step random-walk variance of the leakage correction'),
     Param(E + 'model.p0_leak', 'float', '(1e-12 m^3/(s Pa))^2', 4.0, 0.0, 1e6,
           doc='initial variance of the leakage correction (2e-12 m^3/(s Pa) sigma)'),
-    Param(E + 'model.load_state', 'bool', '', True,
-          doc='add an external-force state (random walk) so a static load balances the measured '
-              'p_D instead of biasing x (23 kN: 26 um vs 251 um without)'),
     Param(E + 'model.q_load', 'float', 'N^2', 1e-4, 0.0, 1e12,
-          doc='per-step random-walk variance of the external force (stribeck friction: the '
-              'load; eq4_36: the load and every friction error); 1e-4: 0.01 N per tick'),
+          doc='per-step random-walk variance of the external force (stribeck_friction: the '
+              'load; eq. 4.36: the load and every friction error); 1e-4: 0.01 N per tick'),
     Param(E + 'model.q_load_jump', 'float', 'N^2', 1e8, 0.0, 1e14,
           doc='per-step variance of the external force after a sample whose pressure '
               'innovation exceeds load_jump_z (a load step; adjustable-level process noise)'),
@@ -132,28 +180,15 @@ ESTIMATOR = Schema('estimator', [
     # projected onto their ranges. Defaults: TUNED (p0, q, ranges DERIVED by
     # tools/tune_estimator from the Table 4.5 family + box and the sensor model,
     # core.estimator.tuning).
-    *_adaptive('leakage', 'lambda', 'chambers: relative leakage correction lambda as a state '
-               '(C_p + C_c x (1+lambda); every leakage without adapt_external_leakage)',
-               1e6, 1e6, -1.0, 1e3),
+    *_adaptive('leakage', 'lambda', 1e6, 1e6, -1.0, 1e3),
     Param(E + 'model.leakage_excitation', 'float', 'Pa', TUNED['model.leakage_excitation'],
           0.0, 1e8,
           doc='lambda is updated only while |p_A - p_B| exceeds this (dead zone; '
               'tune_estimator)'),
-    *_adaptive('external_leakage', 'epsilon', 'chambers: relative correction epsilon of the '
-               'per-port leakage C_r as a state (C_r x (1+epsilon)); lambda then scales the '
-               'cross-port C_p + C_c only', 1e6, 1e6, -1.0, 1e3),
-    *_adaptive('displacement', 'delta', 'chambers: relative displacement correction delta as a '
-               'state (D_p x (1+delta))', 1.0, 1.0, -0.9, 1.0),
-    *_adaptive('compliance', 'kappa', 'chambers: relative compliance correction kappa as a state '
-               '(V_d/beta x (1+kappa))', 1.0, 10.0, -0.9, 10.0),
-    *_adaptive('friction', 'phi', 'chambers with stribeck friction: relative friction correction '
-               'phi as a state (F_c, F_s x (1+phi))', 1.0, 10.0, -0.99, 10.0),
-    Param(E + 'model.flow_state', 'bool', '', True,
-          doc='chambers with stribeck friction: an unmodelled flow v_f (velocity units, A_p v_f '
-              'into A, out of B) as a state, opened at rest while the sensor offset is '
-              'implausible, bounded by the leakage of the pressure difference beyond friction '
-              '(adapt.flow_noise): a persistent velocity bias at rest is not a sensor offset '
-              '(issue 15)'),
+    *_adaptive('external_leakage', 'epsilon', 1e6, 1e6, -1.0, 1e3),
+    *_adaptive('displacement', 'delta', 1.0, 1.0, -0.9, 1.0),
+    *_adaptive('compliance', 'kappa', 1.0, 10.0, -0.9, 10.0),
+    *_adaptive('friction', 'phi', 1.0, 10.0, -0.99, 10.0),
     Param(E + 'model.q_flow', 'float', '(m/s)^2', 1e-9, 0.0, 1.0,
           doc='per-step random walk of v_f while open (closed: 0)'),
     Param(E + 'model.flow_gate', 'float', '', 2.0, 0.0, 1e6,
@@ -180,12 +215,12 @@ ESTIMATOR = Schema('estimator', [
               'flows the adaptive states get wrong integrate into a position error at low '
               'frequency, which the sensor-offset state would otherwise take): the estimate '
               'follows the sensor at low frequency (issue 42: stiffness at C_eq x10)'),
-    Param(E + 'model.hold_blend_time', 'float', 's', 0.2, 0.0, 100.0,
-          doc='while the piston rests (rest_velocity, rest_time) under a held load (the '
-              'pressure difference beyond F_s (1 + phi_max) / A_p and not varying) the published '
-              'position is the sensor\'s reading without its white noise, x_hat + b: nothing '
-              'observes b then, so the loop holds what the sensor reads (issue 42, decision 2); '
-              'b is blended in and out over this time (0: off, x_hat always)'),
+    Param(E + 'model.hold_blend_time', 'float', 's', 0.2, 1e-3, 100.0,
+          doc='stage hold_blend: while the piston rests (rest_velocity, rest_time) under a held '
+              'load (the pressure difference beyond F_s (1 + phi_max) / A_p and not varying) '
+              'the published position is the sensor\'s reading without its white noise, x_hat '
+              '+ b: nothing observes b then, so the loop holds what the sensor reads (issue 42, '
+              'decision 2); b is blended in and out over this time'),
     Param(E + 'model.adapt_gate', 'float', '', 4.0, 0.0, 1e6,
           doc='no update of the adaptive states from a sample whose |position innovation| / '
               'sqrt(S) exceeds this (0: always): a fast transient the model cannot explain '
@@ -208,27 +243,11 @@ ESTIMATOR = Schema('estimator', [
           doc='sensor error band: a larger low-passed disagreement is DISAGREE '
               '(tune_estimator)'),
     Param(E + 'monitor.debounce', 'int', 'samples', 10, 1, 100000),
-    Param(E + 'monitor.hold_time', 'float', 's', 0.5, 0.0, 100.0,
-          doc='a verdict stays reported this long after its condition clears'),
-    # sensor noise model (the filter's R); the defaults match plant.sensors
-    Param(E + 'noise.position_sigma', 'float', 'm', 1.0e-5, 1e-9, 1e-2,
-          doc='white position noise sigma (R of the position; 10 um)'),
-    Param(E + 'noise.position_gm_sigma', 'float', 'm', 2.0e-5, 0.0, 1e-2,
-          doc='low-frequency (Gauss-Markov) position noise sigma, Fig. 4.6 (20 um)'),
-    Param(E + 'noise.position_gm_corner', 'float', 'Hz', 1.0, 1e-3, 100.0,
-          doc='corner frequency of the Gauss-Markov position noise'),
-    Param(E + 'noise.pressure_sigma', 'float', 'Pa', 0.316 * BAR, 1.0, 1e7,
-          doc='one pressure sensor sigma (0.316 bar, sec. 4.1.2); p_D gets twice its '
-              'variance'),
-    Param(E + 'noise.adapt', 'bool', '', True,
-          doc='chambers: measure the position and pressure sensors\' noise level online and '
-              'scale R (and the Gauss-Markov state\'s q) by it (second differences of its '
-              'readings; core.estimator.noise_level, issue 15)'),
     Param(E + 'noise.adapt_time', 'float', 's', 5.0, 0.01, 1e6,
           doc='memory of the noise-level measurement'),
     Param(E + 'noise.adapt_range', 'float[]', '', [0.5, 3.0], 0.01, 100.0, min_len=2,
-          doc='range of the measured noise level, relative to the sigmas above [lo, hi] (the '
-              'random box reaches x2)'),
+          doc='range of the measured noise level, relative to the sigmas of plant.sensors [lo, '
+              'hi] (the random box reaches x2)'),
     Param(E + 'noise.adapt_quiet_velocity', 'float', 'm/s', 0.02, 0.0, 10.0,
           doc='the level is measured only while the pump-flow velocity D_p |omega| / A_p is '
               'below this (faster, the loop carries motion the filter does not follow: a 3 Hz '
@@ -274,12 +293,6 @@ ESTIMATOR = Schema('estimator', [
               '15: the adaptive model converging after a 10 kN step reached 167; a sensor '
               'drift is reported by monitor DISAGREE, 1 mm/s in 0.28 s)'),
     Param(E + 'fault.drift_debounce', 'int', 'samples', 5, 1, 10000),
-    Param(E + 'fault.hold_time', 'float', 's', 0.5, 0.0, 100.0,
-          doc='a detected fault stays reported this long after its condition clears'),
-    Param(E + 'fault.isolate', 'bool', '', True,
-          doc='skip the position update (predict only, adapted model) while a sensor fault '
-              '(jump or stuck) is reported'),
-    # Chinniah friction estimator (sec. 4.1.2) on the running estimate
     Param(E + 'chinniah.enabled', 'bool', '', False,
           doc='run the Chinniah 3-state/4-state friction estimators (eqs. 4.15-4.29) on the '
               'estimate'),
@@ -311,6 +324,27 @@ def check_ranges(p: dict) -> None:
                          f'{E}validity.pressure_max ({hi!r})', E + 'validity.pressure_min')
 
 
+def check_sensor_model(p: dict) -> None:
+    """The sensor model the filter's R comes from (plant.sensors position_sigma, pressure_sigma)
+    has noise: a zero sigma would make R singular (the model filters)."""
+    if p[E + 'filter'] != 'model':
+        return
+    for key, least in (('position_sigma', 1e-9), ('pressure_sigma', 1.0)):
+        v = p['plant.sensors.' + key]
+        if v < least:
+            raise ParamError(f'plant.sensors.{key} = {v!r}: the estimator takes its R from it; '
+                             f'expected >= {least:g} (a noise-free simulated sensor: '
+                             f'plant.sensors.noise = false)', 'plant.sensors.' + key)
+
+
+def check_stages(p: dict) -> None:
+    """estimator.stages names stages of STAGES only ('' alone: none)."""
+    bad = [v for v in p[E + 'stages'] if v not in STAGES and v != '']
+    if bad:
+        raise ParamError(f'{E}stages: unknown stage {bad[0]!r}: expected any of '
+                         f'{", ".join(STAGES)} ([\'\'] for none)', E + 'stages')
+
+
 def check_corners(p: dict) -> None:
     """Each low-pass corner of the estimator at most the Nyquist frequency 1/(2 plant.sim.Ts)
     of its sample period."""
@@ -322,4 +356,5 @@ def check_corners(p: dict) -> None:
                              f'plant.sim.Ts) = {0.5 / ts:g} Hz (plant.sim.Ts = {ts!r})', E + key)
 
 
-SCHEMA = PLANT_SCHEMA + Schema('estimator', ESTIMATOR.params, _chain(check_ranges, check_corners))
+SCHEMA = PLANT_SCHEMA + Schema('estimator', ESTIMATOR.params, _chain(check_stages, check_ranges,
+                                                                 check_corners, check_sensor_model))

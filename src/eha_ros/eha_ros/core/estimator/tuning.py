@@ -53,6 +53,7 @@ from scipy.stats import norm
 
 from ..qft.family_box import load_box
 from .adapt import lowpass_alpha
+from .params import DRIFTING
 
 @dataclass
 class Inputs:
@@ -70,9 +71,7 @@ class Inputs:
     margin: float = 0.25               # projection range widening, fraction of the span
     rho: float = 0.1                   # fraction of the family spread ...
     T_memory: float = 1.0e4            # ... the adaptive states may move within this [s]
-    # viscosity, air and temperature move both leakage paths and beta; the displacement is
-    # geometry and the friction Table 3.7's: q = 0
-    drifting: tuple = ('leakage', 'external_leakage', 'compliance')
+    drifting: tuple = DRIFTING         # the states with a random walk (the others: q = 0)
     monitor_lowpass: float = 5.0       # [Hz]
     jump_k: float = 5.0
     A_p: float = 2.572e-3              # [m^2] piston area
@@ -119,7 +118,8 @@ def derive(inp: Inputs) -> dict:
         r_hi = c_hi + inp.margin * span
         q = (inp.rho ** 2) * var * inp.Ts / inp.T_memory if key in inp.drifting else 0.0
         out[f'model.p0_{key}'] = var
-        out[f'model.q_{key}'] = q
+        if key in inp.drifting:
+            out[f'model.q_{key}'] = q
         out[f'model.{key}_range'] = [r_lo, r_hi]
         notes.append(f'{key}: {name} x{lo:g}..{hi:g} -> correction {c_lo:+.3f}..{c_hi:+.3f}, '
                      f'sigma over Table 4.5 {math.sqrt(var):.4f}; '
