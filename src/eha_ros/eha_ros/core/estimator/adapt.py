@@ -214,18 +214,6 @@ def maneuver(Q, i_load, pz, load_jump_z, q_load, q_load_jump) -> None:
 
 
 @njit(cache=True)
-def leakage_unexcited(x, i_lam, p_excite) -> int:
-    """i_lam while the load pressure |p_A - p_B| (prior) is below p_excite, else -1: at low
-    load pressure the leakage flow lambda C p is too small to tell lambda from the model's
-    other errors (friction, valves), which would bias lambda and turn into a flow error at
-    the next load (Table 3.4: lambda -0.46 learnt during the 3 Hz sine, a 10 kN step then
-    walked the estimate 110 um off). Dead-zone adaptation (Ioannou & Sun 1996, sec. 8.5)."""
-    if i_lam >= 0 and abs(x[2] - x[3]) < p_excite:
-        return i_lam
-    return -1
-
-
-@njit(cache=True)
 def clip(v, lo, hi):
     return lo if v < lo else (hi if v > hi else v)
 

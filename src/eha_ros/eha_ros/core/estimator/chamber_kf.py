@@ -60,7 +60,7 @@ class ChamberKF(MeasuredKF):
                  leakage: tuple | None = None, displacement: tuple | None = None,
                  compliance: tuple | None = None, offset_bound: float = 0.0,
                  adapt_gate: float = 0.0, compliance_alpha: float = 1.0,
-                 leakage_excitation: float = 0.0, friction: tuple | None = None,
+                 friction: tuple | None = None,
                  friction_scale: tuple | None = None, external: tuple | None = None,
                  flow: bool = False):
         """``leakage``/``displacement``/``compliance``: (q per step, p0, lo, hi) of the relative
@@ -68,8 +68,7 @@ class ChamberKF(MeasuredKF):
         [m]: projection bound of the sensor offset b (0: none); ``adapt_gate``: no update of
         lambda, delta, kappa from a sample whose normalised position innovation exceeds it (0:
         always); ``compliance_alpha``: per-tick low-pass weight of kappa's pressure
-        increments; ``leakage_excitation`` [Pa]: lambda is not updated while |p_A - p_B| is
-        below it (adapt.leakage_unexcited); ``friction``: (F_c, F_s, v_s, alpha, v_rest,
+        increments; ``friction``: (F_c, F_s, v_s, alpha, v_rest,
         n_rest, q_rest) of the Stribeck friction input and its rest regime
         (adapt.friction_input; None: eq. 4.36 with F_s, v_eps);
         ``friction_scale``: (q, p0, lo, hi) of the friction scale phi, None: not a state;
@@ -129,7 +128,6 @@ class ChamberKF(MeasuredKF):
         self.i_frozen = min(params) if params else n     # the adaptive states are the last
         self.adapt_gate = float(adapt_gate)
         self.alpha_compliance = float(compliance_alpha)   # low-pass of the compliance flow's input
-        self.leakage_excitation = float(leakage_excitation)
         # (F, G) per check-valve state, index 2 s_a + s_b
         self.modes = []
         L = []                                      # ZOH columns of a unit flow into A, B
@@ -213,9 +211,6 @@ class ChamberKF(MeasuredKF):
         out = super().update(z_pos, p_a, p_b)
         self.project()
         return out
-
-    def unexcited(self) -> int:
-        return adapt.leakage_unexcited(self.x, self.i_leakage, self.leakage_excitation)
 
     def project(self) -> int:
         self.edge = adapt.project(self.x, self.i_leakage, *self.leakage_range,

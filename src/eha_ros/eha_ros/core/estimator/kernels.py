@@ -138,19 +138,16 @@ def update(x, P, H, R, z, y, S):
 @njit(cache=True)
 def update_ws(x, P, H, R, z, y, S, ws):
     """:func:`update` with preallocated scratch ``ws`` (>= workspace_size(n, m) floats)."""
-    return update_gated(x, P, H, R, z, y, S, ws, x.shape[0], 0.0, -1, -1, 0.0)
+    return update_gated(x, P, H, R, z, y, S, ws, x.shape[0], 0.0, -1, 0.0)
 
 
 @njit(cache=True)
-def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_unexcited, i_moved, moved_gate):
+def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_moved, moved_gate):
     """:func:`update_ws`; when any innovation's |y_j| / sqrt(S_jj) exceeds ``gate`` (> 0),
     the gain rows of the states i_frozen .. n-1 are zeroed: those states are not
     updated by this sample, their covariance stays consistent (the Joseph form holds for any
     gain). Used to keep slow parameter states out of a fast transient the model cannot
-    explain (core.estimator.adapt). The gain row of state ``i_unexcited`` (>= 0) is zeroed
-    always: a parameter whose regressor is too small to tell it from model error (dead-zone
-    adaptation, Ioannou & Sun, "Robust Adaptive Control", 1996, sec. 8.5). The gain row of
-    state ``i_moved`` (>= 0) is zeroed when a later measurement's (j >= 1) normalised
+    explain (core.estimator.adapt). The gain row of state ``i_moved`` (>= 0) is zeroed when a later measurement's (j >= 1) normalised
     innovation exceeds ``moved_gate`` (> 0): the position sensor's offset is not updated by the
     sample on which the pressures show that the piston moved (a load step compresses the oil:
     C_eq x10 under 5 kN, 0.33 mm in one tick, 44 um of it taken for sensor offset before)."""
@@ -173,9 +170,6 @@ def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_unexcited, i_moved, 
     mul(H, PHt, S, R, False, False, False)     # S = R + H P H'
     Si = np.linalg.inv(S)
     mul(PHt, Si, K, None, False, False, False)
-    if i_unexcited >= 0:
-        for j in range(m):
-            K[i_unexcited, j] = 0.0
     if i_moved >= 0 and moved_gate > 0.0:
         for j in range(1, m):
             if abs(y[j]) > moved_gate * math.sqrt(S[j, j]):

@@ -95,19 +95,14 @@ class MeasuredKF(kernels.StateView):
         pressures when configured and given. Returns (position innovation, its variance S_00,
         NIS of the whole measurement, measurement dimension)."""
         f0, gate = getattr(self, 'i_frozen', self.n), getattr(self, 'adapt_gate', 0.0)
-        iu = self.unexcited()
         if self.with_pressure and p_a is not None:
             z = np.array((z_pos,) + self.pressure_z(p_a, p_b))
             nis = kernels.update_gated(self.x, self.P, self.H, self.R, z, self.y, self.S,
-                                       self._ws, f0, gate, iu, self.i_moved, self.moved_gate)
+                                       self._ws, f0, gate, self.i_moved, self.moved_gate)
             return float(self.y[0]), float(self.S[0, 0]), float(nis), len(z)
         nis = kernels.update_gated(self.x, self.P, self.H1, self.R1, np.array((z_pos,)),
-                                   self._y1, self._S1, self._ws, f0, gate, iu, -1, 0.0)
+                                   self._y1, self._S1, self._ws, f0, gate, -1, 0.0)
         return float(self._y1[0]), float(self._S1[0, 0]), float(nis), 1
-
-    def unexcited(self) -> int:
-        """Index of a parameter state not to update this sample (-1: none)."""
-        return -1
 
     def set_moved_gate(self, i_state: int, gate: float) -> None:
         """State ``i_state`` (the sensor offset) is not updated from a sample whose pressure
@@ -124,8 +119,7 @@ class MeasuredKF(kernels.StateView):
         self.Rp[:] = self.R[1:, 1:]                 # R may be rescaled (noise_level)
         y, S = np.zeros(m), np.zeros((m, m))
         return float(kernels.update_gated(self.x, self.P, self.Hp, self.Rp, z, y, S, self._ws,
-                                          getattr(self, 'i_frozen', self.n), 0.0,
-                                          self.unexcited(), -1, 0.0))
+                                          getattr(self, 'i_frozen', self.n), 0.0, -1, 0.0))
 
     def innovation_only(self, z_pos: float):
         """Position innovation and its variance without updating (for a rejected sample)."""

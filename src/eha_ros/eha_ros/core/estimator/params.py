@@ -26,7 +26,6 @@ TUNED = {
     'model.compliance_range': [-0.5833, 0.9167],
     'model.p0_friction': 0.1818,
     'model.friction_range': [-0.875, 1.375],
-    'model.leakage_excitation': 0.0,
     'model.offset_bound': 0.0002532,
     'monitor.band': 0.00021362,
     'monitor.lowpass': 5.0,
@@ -181,10 +180,6 @@ ESTIMATOR = Schema('estimator', [
     # tools/tune_estimator from the Table 4.5 family + box and the sensor model,
     # core.estimator.tuning).
     *_adaptive('leakage', 'lambda', 1e6, 1e6, -1.0, 1e3),
-    Param(E + 'model.leakage_excitation', 'float', 'Pa', TUNED['model.leakage_excitation'],
-          0.0, 1e8,
-          doc='lambda is updated only while |p_A - p_B| exceeds this (dead zone; '
-              'tune_estimator)'),
     *_adaptive('external_leakage', 'epsilon', 1e6, 1e6, -1.0, 1e3),
     *_adaptive('displacement', 'delta', 1.0, 1.0, -0.9, 1.0),
     *_adaptive('compliance', 'kappa', 1.0, 10.0, -0.9, 10.0),

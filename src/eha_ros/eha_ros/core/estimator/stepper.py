@@ -45,7 +45,7 @@ CONSTANTS = np.dtype([
     # the chamber filter: check valves, flows (adapt.parameter_columns), adaptive states
     ('p_c', 'f8'), ('C_x', 'f8'), ('C_r', 'f8'), ('p_acc', 'f8'), ('c_Ts', 'f8'),
     ('alpha_compliance', 'f8'), ('i_leakage', 'f8'), ('leakage_range', 'f8', (2,)),
-    ('leakage_excitation', 'f8'), ('i_displacement', 'f8'), ('displacement_range', 'f8', (2,)),
+    ('i_displacement', 'f8'), ('displacement_range', 'f8', (2,)),
     ('i_compliance', 'f8'), ('compliance_range', 'f8', (2,)), ('i_friction', 'f8'),
     ('friction_range', 'f8', (2,)), ('i_external_leakage', 'f8'),
     ('external_leakage_range', 'f8', (2,)), ('i_frozen', 'f8'), ('adapt_gate', 'f8'),
@@ -165,7 +165,7 @@ def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
         for name in ('i_leakage', 'leakage_range', 'i_displacement', 'displacement_range',
                      'i_compliance', 'compliance_range', 'i_friction', 'friction_range',
                      'i_external_leakage', 'external_leakage_range', 'i_gm', 'offset_bound',
-                     'i_frozen', 'adapt_gate', 'leakage_excitation', 'alpha_compliance',
+                     'i_frozen', 'adapt_gate', 'alpha_compliance',
                      'i_flow', 'dp_friction'):
             k[name] = getattr(kf, name)
         e['edge'], e['p_last'], e['clipped'], e['mode'] = kf.edge, kf.p_last, kf.clipped, kf.mode
@@ -348,9 +348,6 @@ def estimate(K, E, a, position, w, pa, pb):
     x, P, Q, H, R, y, S, H1, R1, y1, S1, zm, z1, ws = (a.x, a.P, a.Q, a.H, a.R, a.y, a.S, a.H1,
                                                        a.R1, a.y1, a.S1, a.zm, a.z1, a.ws)
     use_p = k.use_pressure > 0.5
-    iu = -1
-    if k.chambers > 0.5:
-        iu = adapt.leakage_unexcited(x, int(k.i_leakage), k.leakage_excitation)
     if k.noise_adapt > 0.5:
         noise_level.update(k.noise, e.noise, position, pa, pb, pr_ok and use_p, w, R, R1, Q)
     if pr_ok and use_p:
@@ -360,13 +357,13 @@ def estimate(K, E, a, position, w, pa, pb):
             zm[2] = pb
         else:
             zm[1] = e.pd_meas
-        nis = update_gated(x, P, H, R, zm, y, S, ws, int(k.i_frozen), k.adapt_gate, iu,
+        nis = update_gated(x, P, H, R, zm, y, S, ws, int(k.i_frozen), k.adapt_gate,
                            int(k.i_moved), k.moved_gate)
         innov, s00, m = y[0], S[0, 0], zm.shape[0]
         pz = fd.pressure_z(y, S, m)
     else:
         z1[0] = position
-        nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k.i_frozen), k.adapt_gate, iu,
+        nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k.i_frozen), k.adapt_gate,
                            -1, 0.0)
         innov, s00, m = y1[0], S1[0, 0], 1
         pz = 0.0

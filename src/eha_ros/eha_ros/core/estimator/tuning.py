@@ -35,11 +35,10 @@ position-sensor model (config/plant.yaml plant.sensors.*, = the filter's R).
   offset state is projected to +-(k + 1) sigma_gm (the estimate never stays further from the
   measurement, whatever the model says), and the monitor's DISAGREE band is k sigma_d of its
   low-passed disagreement z - x_hat (b plus the low-passed white noise).
-- Leakage excitation (dead zone of lambda, off by default): lambda learns only while a unit
-  lambda error moves the piston by at least v_excite: |p_A - p_B| > v_excite A_p / (C_x + C_r).
-  Measured with v_excite = 2 mm/s (9 bar): the nominal RMSE ratio went to 0.88, because
-  lambda's variance then never shrinks during light-load motion and its column keeps the
-  position uncertain.
+- No dead zone on lambda (tried and removed, issue 44): lambda learning only while a unit
+  lambda error moves the piston by at least 2 mm/s (|p_A - p_B| > 9 bar) took the nominal RMSE
+  ratio to 0.88, because lambda's variance then never shrinks during light-load motion and its
+  column keeps the position uncertain.
 - Sensor jump step: a jump moves the reading within one sample; the innovation increment of
   noise alone has sigma sqrt(2) sigma_white (at the largest noise scale); jump_step = k that.
 """
@@ -77,7 +76,6 @@ class Inputs:
     A_p: float = 2.572e-3              # [m^2] piston area
     C_x: float = 2.0e-12               # [m^3/(s Pa)] C_p + C_c (cross-port) of the nominal plant
     C_r: float = 3.6e-12               # [m^3/(s Pa)] C_r (per port) of the nominal plant
-    v_excite: float = 0.0              # [m/s] piston speed a unit lambda error must make (0: off)
 
 
 def log_uniform_moments(lo: float, hi: float, f=lambda m: m):
@@ -125,9 +123,6 @@ def derive(inp: Inputs) -> dict:
                      f'sigma over Table 4.5 {math.sqrt(var):.4f}; '
                      f'range [{r_lo:+.3f}, {r_hi:+.3f}], '
                      f'q {q:.3g}/step')
-    out['model.leakage_excitation'] = inp.v_excite * inp.A_p / (inp.C_x + inp.C_r)
-    notes.append(f'leakage excitation: {out["model.leakage_excitation"] / 1e5:.2f} bar '
-                 f'(a unit lambda error = {inp.v_excite * 1e3:g} mm/s)')
     noise = inp.box['noise'][1]
     s_gm, s_w = inp.gm_sigma * noise, inp.position_sigma * noise
     n_ind = inp.T_op * 2.0 * math.pi * inp.gm_corner * inp.n_plants
