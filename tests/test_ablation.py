@@ -89,3 +89,30 @@ def test_ablation_runs_end_to_end(tmp_path):
     info = json.loads((out / 'load_state' / 'load_step-seed3' / 'campaign.json').read_text())
     assert 'load_state' not in info['scenario']['overrides']['estimator:estimator.stages']
     assert os.path.isfile(out / 'ablation.md')
+
+
+def test_knob_variants_name_each_value_and_reach_the_runs(tmp_path):
+    v = A.knob_variants(['model.flow_share=0.5,2', 'estimator.fault.drift_h=150'])
+    assert v == {'model.flow_share=0.5': {'estimator.model.flow_share': 0.5},
+                 'model.flow_share=2': {'estimator.model.flow_share': 2},
+                 'fault.drift_h=150': {'estimator.fault.drift_h': 150}}
+    A.check_overrides(v)
+    path = A.scenario_files(['step'], 'model.flow_share=0.5', str(tmp_path),
+                            v['model.flow_share=0.5'])[0]
+    assert SC.load(path).overrides['estimator:estimator.model.flow_share'] == 0.5
+
+
+@pytest.mark.parametrize('text,words', [
+    ('model.flow_share', 'expected KEY=V1,V2'),
+    ('=1,2', 'expected KEY=V1,V2'),
+    ('model.flow_share=[1', 'not a YAML list'),
+])
+def test_malformed_knob_is_one_line(text, words):
+    with pytest.raises(UsageError, match=words) as err:
+        A.knob_variants([text])
+    assert '\n' not in str(err.value)
+
+
+def test_a_knob_out_of_its_range_is_refused_before_any_run():
+    with pytest.raises(UsageError, match='model.flow_share=-1: .*estimator.model.flow_share'):
+        A.check_overrides(A.knob_variants(['model.flow_share=-1']))

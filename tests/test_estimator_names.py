@@ -14,7 +14,7 @@ DERIVED = {
     'use_pressure': 'measurements == position_pressure, for a model filter',
     'model_filter': 'filter', 'chambers': 'model.structure', 'n_lin': 'the filter',
     'alpha_pressure': 'model.pressure_lowpass', 'alpha_friction': 'model.friction_lowpass',
-    'alpha_compliance': 'model.compliance_lowpass', 'A_p': 'plant', 'D_p': 'plant',
+    'A_p': 'plant', 'D_p': 'plant',
     'p_c': 'plant', 'C_x': 'plant', 'C_r': 'plant', 'p_acc': 'plant', 'c_Ts': 'plant, Ts',
     'i_leak': 'stages: leak_state', 'i_leakage': 'stages: adapt_leakage',
     'i_displacement': 'stages: adapt_displacement', 'i_compliance': 'stages: adapt_compliance',

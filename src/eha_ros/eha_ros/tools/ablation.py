@@ -11,6 +11,10 @@ EPILOG = """\
 stages (each switched off by leaving it out of estimator.stages; docs/parameters.md says what
 each one adds to the Kalman filter of eq. 4.35):
 {stages}
+Knobs: --vary KEY=V1,V2 (repeatable) runs the scenarios with the estimator.* parameter KEY
+at each value instead, e.g. --vary model.flow_share=0.5,2: a knob whose values change no
+passed run and no worst figure is a candidate for removal (issue 44). With --vary alone only
+the knob variants run; add --stages to run stages as well.
 Runs the scenarios with every stage on (all_on), then with each stage off, on the same family
 and seeds: one campaign set per stage under --out/<stage>/ (its scenarios/ folder holds the
 scenario YAMLs with the overrides), then --out/ablation.md and ablation.json: per stage and
@@ -36,7 +40,10 @@ def main(argv=None) -> int:
     ap.add_argument('scenario', nargs='*', help=f'scenario name(s) or YAML path(s) (default: '
                                                 f'{", ".join(A.SCENARIOS)})')
     ap.add_argument('--stages', default=None, metavar='A,B',
-                    help='comma list of the stages to switch off (default: all)')
+                    help='comma list of the stages to switch off (default: all, none with '
+                         '--vary)')
+    ap.add_argument('--vary', action='append', default=[], metavar='KEY=V1,V2',
+                    help='an estimator.* parameter and the values to try (repeatable)')
     ap.add_argument('--family', default='thesis', help='thesis | random:N | FILE '
                                                       '(default thesis)')
     ap.add_argument('--seeds', default='tuning', metavar='A-B',
@@ -55,12 +62,14 @@ def main(argv=None) -> int:
         from ..core.config.cli import UsageError
         from ..core.sim import campaign as C
         from ..core.sim import campaign_set as CS
-        stages = A.parse_stages(args.stages)
+        knobs = A.knob_variants(args.vary)
+        stages = A.parse_stages(args.stages) if args.stages or not knobs else []
+        variants = {**{s: A.STAGES[s] for s in stages}, **knobs}
         seeds = CS.parse_seeds(args.seeds)
         scenarios = args.scenario or list(A.SCENARIOS)
         for s in scenarios:                               # bad input fails before the cluster
             C.SC.load(s)
-        A.check_overrides(stages)
+        A.check_overrides(variants)
         C.FAM.resolve(args.family, seeds[0])
         if args.workers is not None and args.workers < 1:
             raise UsageError(f'--workers {args.workers}: expected at least 1')
@@ -72,7 +81,7 @@ def main(argv=None) -> int:
         client, cluster = C.connect(args.workers, args.scheduler)
         log = (lambda s: print(s, file=sys.stderr, flush=True))
         try:
-            result = A.run(stages, scenarios, args.family, seeds, out, client, log=log,
+            result = A.run(variants, scenarios, args.family, seeds, out, client, log=log,
                            progress=not args.quiet)
         finally:
             C.disconnect(client, cluster)

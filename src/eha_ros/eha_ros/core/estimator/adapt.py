@@ -169,12 +169,12 @@ def friction_column(F, G, n_lin, i_phi, fs) -> None:
 
 
 @njit(cache=True)
-def pressure_increments(pl, pa, pb, alpha) -> None:
-    """pl = [p_A, p_B at the last predict, low-passed increments of p_A, p_B]: the compliance
-    flow's input, low-passed (alpha per tick) so the pressure noise in a one-tick difference
-    does not enter the model as flow noise; then pl[0:2] <- (pa, pb)."""
-    pl[2] += alpha * ((pa - pl[0]) - pl[2])
-    pl[3] += alpha * ((pb - pl[1]) - pl[3])
+def pressure_increments(pl, pa, pb) -> None:
+    """pl = [p_A, p_B at the last predict, their increments since]: the compliance flow's
+    input (a low-pass of the increments at 10-30 Hz was measured worse and removed, issue 44);
+    then pl[0:2] <- (pa, pb)."""
+    pl[2] = pa - pl[0]
+    pl[3] = pb - pl[1]
     pl[0] = pa
     pl[1] = pb
 

@@ -59,7 +59,7 @@ class ChamberKF(MeasuredKF):
                  v_eps: float = 3e-3, q_load: float | None = None, p0_load: float = 1e8,
                  leakage: tuple | None = None, displacement: tuple | None = None,
                  compliance: tuple | None = None, offset_bound: float = 0.0,
-                 adapt_gate: float = 0.0, compliance_alpha: float = 1.0,
+                 adapt_gate: float = 0.0,
                  friction: tuple | None = None,
                  friction_scale: tuple | None = None, external: tuple | None = None,
                  flow: bool = False):
@@ -67,9 +67,7 @@ class ChamberKF(MeasuredKF):
         corrections lambda/delta/kappa (:mod:`.adapt`), None: not a state; ``offset_bound``
         [m]: projection bound of the sensor offset b (0: none); ``adapt_gate``: no update of
         lambda, delta, kappa from a sample whose normalised position innovation exceeds it (0:
-        always); ``compliance_alpha``: per-tick low-pass weight of kappa's pressure
-        increments; ``friction``: (F_c, F_s, v_s, alpha, v_rest,
-        n_rest, q_rest) of the Stribeck friction input and its rest regime
+        always); ``friction``: (F_c, F_s, v_s, alpha, v_rest, n_rest, q_rest) of the Stribeck friction input and its rest regime
         (adapt.friction_input; None: eq. 4.36 with F_s, v_eps);
         ``friction_scale``: (q, p0, lo, hi) of the friction scale phi, None: not a state;
         ``external``: (q, p0, lo, hi) of the external-leakage correction epsilon (C_r x
@@ -127,7 +125,6 @@ class ChamberKF(MeasuredKF):
                               self.i_friction, self.i_external_leakage) if i >= 0]
         self.i_frozen = min(params) if params else n     # the adaptive states are the last
         self.adapt_gate = float(adapt_gate)
-        self.alpha_compliance = float(compliance_alpha)   # low-pass of the compliance flow's input
         # (F, G) per check-valve state, index 2 s_a + s_b
         self.modes = []
         L = []                                      # ZOH columns of a unit flow into A, B

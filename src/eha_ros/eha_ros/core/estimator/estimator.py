@@ -82,7 +82,6 @@ def build_filter(p: dict):
                        q_load=p[e + 'model.q_load'] if on(p, 'load_state') else None,
                        p0_load=p[e + 'model.p0_load'], leakage=lam, displacement=dlt,
                        compliance=kap, adapt_gate=p[m + 'adapt_gate'],
-                       compliance_alpha=adapt.lowpass_alpha(p[m + 'compliance_lowpass'], pp.Ts),
                        offset_bound=p[m + 'offset_bound'] if gm else 0.0,
                        friction=fric, friction_scale=phi, external=eps,
                        flow=on(p, 'flow_state') and with_p)

@@ -14,7 +14,7 @@ NIS of the Kalman filter as a fault-detection signal).
   bias undetected as a jump (issue 42, 2 % of the sensor_fault runs once each run drew its own
   noise). A large innovation without that step is left to the CUSUM (drift / model mismatch),
   not called a sensor jump;
-- stuck: the reading of a noisy sensor unchanged (within ``stuck_tolerance``) for
+- stuck: the reading of a noisy sensor unchanged (bit for bit) for
   ``stuck_samples`` samples; with the bench's ~10 um white noise and 1 um resolution two equal
   consecutive readings happen a few % of the time, 25 in a row practically never. (A
   noise-free sensor at standstill would look stuck: set stuck_samples high there.)
@@ -48,9 +48,9 @@ def pressure_z(y, S, m) -> float:
 
 # constants (FK_*) and state (FS_*) of one detector: its own two arrays, which the estimator's
 # compiled path (core.estimator.stepper) reads and writes in place through slices
-(FK_JUMP, FK_JUMP_N, FK_STUCK_N, FK_STUCK_TOL, FK_DRIFT_K, FK_DRIFT_H, FK_DRIFT_N, FK_HOLD,
- FK_JUMP_STEP, FK_JUMP_PVETO) = range(10)
-NFK = 10
+(FK_JUMP, FK_JUMP_N, FK_STUCK_N, FK_DRIFT_K, FK_DRIFT_H, FK_DRIFT_N, FK_HOLD, FK_JUMP_STEP,
+ FK_JUMP_PVETO) = range(9)
+NFK = 9
 (FS_NJUMP, FS_NSAME, FS_NDRIFT, FS_GPOS, FS_GNEG, FS_ZPREV, FS_HAS_ZPREV, FS_YPREV,
  FS_STEPPED, FS_CODE) = range(10)
 FS_HOLD = 10            # 3 entries: JUMP, STUCK, DRIFT (ticks the verdict stays reported)
@@ -94,7 +94,7 @@ def detect(k, s, z, innovation, S, pz) -> int:
     r = innovation / sqrt(S)
     jump:  |r| > FK_JUMP for FK_JUMP_N samples, the run began with an innovation step
            >= FK_JUMP_STEP and no pressure innovation >= FK_JUMP_PVETO
-    stuck: z within FK_STUCK_TOL of the previous z for FK_STUCK_N samples
+    stuck: z equal to the previous z for FK_STUCK_N samples
     drift: g+ = max(0, g+ + r - FK_DRIFT_K), g- = max(0, g- - r - FK_DRIFT_K) above FK_DRIFT_H
            for FK_DRIFT_N samples"""
     r = innovation / math.sqrt(S) if S > 0.0 else 0.0
@@ -106,7 +106,7 @@ def detect(k, s, z, innovation, S, pz) -> int:
     if pz >= k[FK_JUMP_PVETO] and 0 < s[FS_NJUMP] <= VETO_SAMPLES:
         s[FS_STEPPED] = 0.0
     s[FS_YPREV] = innovation
-    same = s[FS_HAS_ZPREV] > 0.5 and abs(z - s[FS_ZPREV]) <= k[FK_STUCK_TOL]
+    same = s[FS_HAS_ZPREV] > 0.5 and z == s[FS_ZPREV]
     s[FS_NSAME] = s[FS_NSAME] + 1 if same else 0
     s[FS_ZPREV] = z
     s[FS_HAS_ZPREV] = 1.0
@@ -138,14 +138,13 @@ class FaultDetector:
     Constants and state are the arrays ``k`` and ``s`` (FK_*, FS_*) of :func:`detect`."""
 
     def __init__(self, Ts: float, jump_threshold: float = 8.0, jump_debounce: int = 3,
-                 stuck_samples: int = 25, stuck_tolerance: float = 0.0, drift_k: float = 0.5,
+                 stuck_samples: int = 25, drift_k: float = 0.5,
                  drift_h: float = 150.0, drift_debounce: int = 5, hold_time: float = 0.5,
                  jump_step: float = 0.0, jump_pressure_veto: float = 1e300):
         self.Ts = Ts
         self.k = np.zeros(NFK)
-        self.k[:] = (jump_threshold, jump_debounce, stuck_samples, stuck_tolerance, drift_k,
-                     drift_h, drift_debounce, int(round(hold_time / Ts)), jump_step,
-                     jump_pressure_veto)
+        self.k[:] = (jump_threshold, jump_debounce, stuck_samples, drift_k, drift_h,
+                     drift_debounce, int(round(hold_time / Ts)), jump_step, jump_pressure_veto)
         self.s = np.zeros(NFS)
         # compiled (or loaded) now: no_sample() is first called by a stale tick, mid-run
         detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0), no_sample(self.k, self.s.copy())
@@ -154,7 +153,7 @@ class FaultDetector:
     def from_params(cls, p: dict, Ts: float) -> 'FaultDetector':
         f = 'estimator.fault.'
         return cls(Ts, p[f + 'jump_threshold'], p[f + 'jump_debounce'], p[f + 'stuck_samples'],
-                   p[f + 'stuck_tolerance'], p[f + 'drift_k'], p[f + 'drift_h'],
+                   p[f + 'drift_k'], p[f + 'drift_h'],
                    p[f + 'drift_debounce'], p['estimator.hold_time'], p[f + 'jump_step'],
                    p[f + 'jump_pressure_veto'])
 

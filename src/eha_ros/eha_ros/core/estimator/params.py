@@ -220,9 +220,6 @@ ESTIMATOR = Schema('estimator', [
           doc='no update of the adaptive states from a sample whose |position innovation| / '
               'sqrt(S) exceeds this (0: always): a fast transient the model cannot explain '
               '(an unknown load step) must not be taken for a parameter change'),
-    Param(E + 'model.compliance_lowpass', 'float', 'Hz', 0.0, 0.0, 1e4,
-          doc='low-pass of the pressure increments that carry the compliance (kappa) flow (0: '
-              'none; 10-30 Hz measured worse)'),
     Param(E + 'model.q_x_disagree', 'float', 'm^2', 1e-8, 0.0, 1.0,
           doc='per-step position process noise while filter and sensor disagree beyond the '
               'band (monitor.band): the estimate is pulled back to the measurement'),
@@ -279,8 +276,6 @@ ESTIMATOR = Schema('estimator', [
           doc='identical consecutive readings of the noisy sensor that mean stuck (10 um '
               'noise, 1 um steps: 2.8 % per pair, 1e-14 for 10; was 25: 24 ms of a stuck '
               'reading pulled the estimate 0.2 mm before isolation)'),
-    Param(E + 'fault.stuck_tolerance', 'float', 'm', 0.0, 0.0, 1e-3,
-          doc='readings closer than this count as identical'),
     Param(E + 'fault.drift_k', 'float', '', 0.5, 0.0, 100.0,
           doc='CUSUM allowance on the normalised innovation'),
     Param(E + 'fault.drift_h', 'float', '', 300.0, 1.0, 1e9,
@@ -302,8 +297,7 @@ ESTIMATOR = Schema('estimator', [
 
 RANGES = ('model.leakage_range', 'model.external_leakage_range', 'model.displacement_range',
           'model.compliance_range', 'model.friction_range', 'noise.adapt_range')
-LOWPASS = ('model.friction_lowpass', 'model.pressure_lowpass', 'model.compliance_lowpass',
-           'monitor.lowpass')
+LOWPASS = ('model.friction_lowpass', 'model.pressure_lowpass', 'monitor.lowpass')
 
 
 def check_ranges(p: dict) -> None:

@@ -44,7 +44,7 @@ CONSTANTS = np.dtype([
     ('A_p', 'f8'), ('D_p', 'f8'), ('F_s', 'f8'), ('v_eps', 'f8'), ('i_leak', 'f8'),
     # the chamber filter: check valves, flows (adapt.parameter_columns), adaptive states
     ('p_c', 'f8'), ('C_x', 'f8'), ('C_r', 'f8'), ('p_acc', 'f8'), ('c_Ts', 'f8'),
-    ('alpha_compliance', 'f8'), ('i_leakage', 'f8'), ('leakage_range', 'f8', (2,)),
+    ('i_leakage', 'f8'), ('leakage_range', 'f8', (2,)),
     ('i_displacement', 'f8'), ('displacement_range', 'f8', (2,)),
     ('i_compliance', 'f8'), ('compliance_range', 'f8', (2,)), ('i_friction', 'f8'),
     ('friction_range', 'f8', (2,)), ('i_external_leakage', 'f8'),
@@ -165,7 +165,7 @@ def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
         for name in ('i_leakage', 'leakage_range', 'i_displacement', 'displacement_range',
                      'i_compliance', 'compliance_range', 'i_friction', 'friction_range',
                      'i_external_leakage', 'external_leakage_range', 'i_gm', 'offset_bound',
-                     'i_frozen', 'adapt_gate', 'alpha_compliance',
+                     'i_frozen', 'adapt_gate',
                      'i_flow', 'dp_friction'):
             k[name] = getattr(kf, name)
         e['edge'], e['p_last'], e['clipped'], e['mode'] = kf.edge, kf.p_last, kf.clipped, kf.mode
@@ -280,7 +280,7 @@ def predict_tick(K, E, a, w):
         adapt.friction_column(F, G, int(k.n_lin), int(k.i_friction), e.friction)
         if k.i_leakage >= 0 or k.i_displacement >= 0 or k.i_compliance >= 0:
             pl = e.p_last
-            adapt.pressure_increments(pl, x[2], x[3], k.alpha_compliance)
+            adapt.pressure_increments(pl, x[2], x[3])
             adapt.parameter_columns(F, Gm, mode * n, G.shape[1], int(k.n_lin),
                                     int(k.i_leakage), int(k.i_displacement),
                                     int(k.i_compliance), int(k.i_external_leakage), x[2], x[3],

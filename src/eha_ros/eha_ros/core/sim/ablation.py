@@ -2,9 +2,12 @@
 each stage switched off in turn, on the same family and seeds; a stage earns its place when
 switching it off costs passed runs or worsens a spec's worst figure.
 
-A stage is switched off by leaving it out of estimator.stages (:data:`STAGES`); each run is a
-campaign set (core.sim.campaign_set) of the scenarios with those overrides added to each
-scenario's own, under DIR/<stage>/. The table compares each stage's summary with 'all_on'.
+A stage is switched off by leaving it out of estimator.stages (:data:`STAGES`). A knob (an
+estimator.* number) is judged the same way with its value changed (:func:`knob_variants`: a
+knob whose every value changes nothing is a candidate for removal). Each variant, a name and
+its estimator.* overrides, is a campaign set (core.sim.campaign_set) of the scenarios with the
+overrides added to each scenario's own, under DIR/<name>/. The table compares each variant's
+summary with 'all_on'.
 """
 from __future__ import annotations
 
@@ -39,20 +42,44 @@ def parse_stages(text: str | None) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-def scenario_files(scenarios: list, stage: str, folder: str) -> list[str]:
-    """Each scenario written to ``folder`` as YAML with the stage's overrides added to its
-    own ('all_on': unchanged); a scenario that already sets a stage key is refused."""
+def knob_variants(texts: list) -> dict:
+    """``--vary`` texts 'KEY=V1,V2' -> {'KEY=V1': {'estimator.KEY': V1}, ...}: KEY an
+    estimator.* parameter (the prefix may be left out), each value a YAML scalar or list;
+    UsageError for a malformed text."""
+    out = {}
+    for text in texts or []:
+        key, eq, values = text.partition('=')
+        key = key.strip()
+        if not eq or not key or not values.strip():
+            raise UsageError(f'--vary {text!r}: expected KEY=V1,V2 (an estimator.* parameter '
+                             f'and the values to try)')
+        full = key if key.startswith('estimator.') else 'estimator.' + key
+        try:
+            vals = yaml.safe_load(f'[{values}]')
+        except yaml.YAMLError:
+            raise UsageError(f'--vary {text!r}: the values are not a YAML list') from None
+        for v in vals:
+            out[f'{full[len("estimator."):]}={v}'] = {full: v}
+    return out
+
+
+def scenario_files(scenarios: list, stage: str, folder: str,
+                   overrides: dict | None = None) -> list[str]:
+    """Each scenario written to ``folder`` as YAML with the variant's overrides (default: stage
+    ``stage``'s) added to its own ('all_on': unchanged); a scenario that already sets one of
+    those keys is refused."""
     from . import scenarios as SC
     os.makedirs(folder, exist_ok=True)
     paths = []
     for name in scenarios:
         scn = SC.load(name)
         doc = {k: v for k, v in scn.as_dict().items() if k != 'duration'}
-        extra = {f'estimator:{k}': v for k, v in STAGES.get(stage, {}).items()}
+        over = STAGES.get(stage, {}) if overrides is None else overrides
+        extra = {f'estimator:{k}': v for k, v in over.items()}
         clash = sorted(set(extra) & set(doc['overrides']))
         if clash:
-            raise UsageError(f'scenario {scn.name} sets {", ".join(clash)} itself: stage '
-                             f'{stage} cannot switch it off')
+            raise UsageError(f'scenario {scn.name} sets {", ".join(clash)} itself: variant '
+                             f'{stage} cannot change it')
         doc['overrides'] = {**doc['overrides'], **extra}
         doc['description'] = (doc['description'] + f' [ablation: {stage}]').strip()
         path = os.path.join(folder, f'{scn.name}.yaml')
@@ -62,39 +89,49 @@ def scenario_files(scenarios: list, stage: str, folder: str) -> list[str]:
     return paths
 
 
-def check_overrides(stages: list) -> None:
-    """Every stage's overrides load (names, types, cross-key checks) before any run starts."""
+def check_overrides(variants) -> None:
+    """Every variant's overrides load (names, types, cross-key checks) before any run starts;
+    ``variants``: {name: overrides}, or stage names."""
     from ..config.params import ParamError
     from .batch import nominal_params
-    for stage in stages:
+    if not isinstance(variants, dict):
+        variants = {s: STAGES[s] for s in variants}
+    for name, over in variants.items():
         try:
-            nominal_params(overrides={f'estimator:{k}': v for k, v in STAGES[stage].items()})
+            nominal_params(overrides={f'estimator:{k}': v for k, v in over.items()})
         except ParamError as err:
-            raise UsageError(f'stage {stage}: {err}') from None
+            raise UsageError(f'{name}: {err}') from None
 
 
-def run(stages: list, scenarios: list, family: str, seeds: list, out: str, client,
+def run(variants, scenarios: list, family: str, seeds: list, out: str, client,
         log=print, progress: bool = True) -> dict:
-    """'all_on' and each stage off: a campaign set each under ``out``/<stage>/ (kept and
-    resumed like a set); returns the table (also ``out``/ablation.json, .md)."""
+    """'all_on' and each variant ({name: overrides}, or stage names: each stage off): a
+    campaign set each under ``out``/<name>/ (kept and resumed like a set); returns the table
+    (also ``out``/ablation.json, .md)."""
     from .campaign_set import run_set
-    check_overrides(stages)
+    if not isinstance(variants, dict):
+        variants = {s: STAGES[s] for s in variants}
+    check_overrides(variants)
     summaries = {}
-    for stage in [BASE] + list(stages):
+    for stage, over in [(BASE, {})] + list(variants.items()):
         d = os.path.join(out, stage)
-        log(f'ablation: {stage} ({"every stage on" if stage == BASE else "switched off"})')
-        files = scenario_files(scenarios, stage, os.path.join(d, 'scenarios'))
+        what = ('every stage on' if stage == BASE else 'switched off' if stage in STAGES
+                else ', '.join(f'{k} = {v}' for k, v in over.items()))
+        log(f'ablation: {stage} ({what})')
+        files = scenario_files(scenarios, stage, os.path.join(d, 'scenarios'), over)
         summaries[stage] = run_set(files, family, seeds, d, client, log=log, progress=progress,
                                    report=False)
     from . import scenarios as SC
-    result = table(summaries, family, seeds, {n: SC.load(n).specs for n in scenarios})
+    result = table(summaries, family, seeds, {n: SC.load(n).specs for n in scenarios},
+                   variants)
     write_json(os.path.join(out, 'ablation.json'), result)
     with open(os.path.join(out, 'ablation.md'), 'w', encoding='utf-8') as f:
         f.write('\n'.join(markdown(result)) + '\n')
     return result
 
 
-def table(summaries: dict, family: str, seeds: list, specs: dict) -> dict:
+def table(summaries: dict, family: str, seeds: list, specs: dict,
+          variants: dict | None = None) -> dict:
     """{'family', 'seeds', 'scenarios', 'stages', 'rows': {stage: {scenario: cell}}}: a cell
     holds the passed runs summed over the seeds (and all_on's), the worst seed's count, and
     each spec's worst figure with its relative change from all_on and whether it is worse
@@ -119,7 +156,7 @@ def table(summaries: dict, family: str, seeds: list, specs: dict) -> dict:
                              worst_seed_passed=s['worst_passed'], specs=cell_specs)
         rows[stage] = row
     return dict(family=family, seeds=list(seeds), scenarios=list(base),
-                stages={k: STAGES.get(k, {}) for k in summaries}, rows=rows)
+                stages={k: (variants or STAGES).get(k, {}) for k in summaries}, rows=rows)
 
 
 def _change(v, base):
@@ -130,7 +167,7 @@ def _change(v, base):
 
 
 def verdict(result: dict, stage: str, tolerance: float = 0.05) -> str:
-    """'earns' when switching ``stage`` off costs a passed run in some scenario or makes a
+    """'earns' when switching ``stage`` off (or a knob's variant) costs a passed run in some scenario or makes a
     spec's worst figure worse by more than ``tolerance`` (relative: beyond noise);
     'harmful' when off only gains passed runs; 'no effect' otherwise."""
     cells = result['rows'][stage].values()
@@ -151,7 +188,7 @@ def markdown(result: dict) -> list[str]:
              'Passed runs summed over the seeds; in brackets the change from every stage on. '
              'Verdict (core.sim.ablation.verdict): earns = off costs a passed run or worsens a '
              'worst figure by more than 5 %; harmful = off only gains passed runs.', '',
-             '| stage off | ' + ' | '.join(names) + ' | verdict |',
+             '| stage off / knob | ' + ' | '.join(names) + ' | verdict |',
              '| --- | ' + ' | '.join('---' for _ in names) + ' | --- |']
     for stage, row in result['rows'].items():
         cells = []
@@ -165,7 +202,7 @@ def markdown(result: dict) -> list[str]:
     for n in names:
         lines.append(f'### {n}')
         metrics = sorted({m for row in result['rows'].values() for m in row[n]['specs']})
-        lines.append('| stage off | ' + ' | '.join(metrics) + ' |')
+        lines.append('| stage off / knob | ' + ' | '.join(metrics) + ' |')
         lines.append('| --- | ' + ' | '.join('---' for _ in metrics) + ' |')
         for stage, row in result['rows'].items():
             cells = []
