@@ -67,8 +67,9 @@ class ChamberKF(MeasuredKF):
         corrections lambda/delta/kappa (:mod:`.adapt`), None: not a state; ``offset_bound``
         [m]: projection bound of the sensor offset b (0: none); ``adapt_gate``: no update of
         lambda, delta, kappa from a sample whose normalised position innovation exceeds it (0:
-        always); ``friction``: (F_c, F_s, v_s, alpha, v_rest, n_rest, q_rest) of the Stribeck friction input and its rest regime
-        (adapt.friction_input; None: eq. 4.36 with F_s, v_eps);
+        always); ``friction``: (F_c, F_s, v_s, alpha, v_rest, n_rest, q_rest) of the Stribeck
+        friction input and its rest regime (adapt.friction_input; None: eq. 4.36 with F_s,
+        v_eps);
         ``friction_scale``: (q, p0, lo, hi) of the friction scale phi, None: not a state;
         ``external``: (q, p0, lo, hi) of the external-leakage correction epsilon (C_r x
         (1 + epsilon); lambda then scales C_x only), None: lambda scales both paths;

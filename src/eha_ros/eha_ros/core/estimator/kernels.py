@@ -147,10 +147,11 @@ def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_moved, moved_gate):
     the gain rows of the states i_frozen .. n-1 are zeroed: those states are not
     updated by this sample, their covariance stays consistent (the Joseph form holds for any
     gain). Used to keep slow parameter states out of a fast transient the model cannot
-    explain (core.estimator.adapt). The gain row of state ``i_moved`` (>= 0) is zeroed when a later measurement's (j >= 1) normalised
-    innovation exceeds ``moved_gate`` (> 0): the position sensor's offset is not updated by the
-    sample on which the pressures show that the piston moved (a load step compresses the oil:
-    C_eq x10 under 5 kN, 0.33 mm in one tick, 44 um of it taken for sensor offset before)."""
+    explain (core.estimator.adapt). The gain row of state ``i_moved`` (>= 0) is zeroed when a
+    later measurement's (j >= 1) normalised innovation exceeds ``moved_gate`` (> 0): the
+    position sensor's offset is not updated by the sample on which the pressures show that the
+    piston moved (a load step compresses the oil: C_eq x10 under 5 kN, 0.33 mm in one tick,
+    44 um of it taken for sensor offset before)."""
     n = x.shape[0]
     m = z.shape[0]
     o = 0

@@ -128,16 +128,16 @@ ESTIMATOR = Schema('estimator', [
           doc='eq4_35 structure only: p_D leakage: boost = 2 (C_p+C_c+C_r) beta/V_d, '
               'eq3_22 = 2 C_eq beta/V_d (as the plant), eq4_35 = C_eq beta/V_d (as printed)'),
     Param(E + 'model.rest_velocity', 'float', 'm/s', 3e-3, 0.0, 1.0,
-          doc='stribeck_friction: the piston is at rest while the pump-flow velocity stays below this '
-              'for rest_time (stiction: the friction is whatever holds it)'),
+          doc='stribeck_friction: the piston is at rest while the pump-flow velocity stays '
+              'below this for rest_time (stiction: the friction is whatever holds it)'),
     Param(E + 'model.rest_time', 'float', 's', 0.1, 0.0, 100.0,
-          doc='stribeck_friction: how long the pump-flow velocity stays below rest_velocity before the '
-              'piston counts as at rest (stiction)'),
+          doc='stribeck_friction: how long the pump-flow velocity stays below rest_velocity '
+              'before the piston counts as at rest (stiction)'),
     Param(E + 'model.q_load_rest', 'float', 'N^2', 1000.0, 0.0, 1e12,
-          doc='stribeck_friction: per-step variance added to the force state\'s random walk while the '
-              'piston is at rest (stiction: the holding force is whatever holds it; the friction '
-              'input is held). Campaigns over the family tried 1e2, 1e3, 3e3, 1e4: above 1e3 '
-              'a 1 mm sensor bias at rest is no longer told from motion'),
+          doc='stribeck_friction: per-step variance added to the force state\'s random walk '
+              'while the piston is at rest (stiction: the holding force is whatever holds it; '
+              'the friction input is held). Campaigns over the family tried 1e2, 1e3, 3e3, '
+              '1e4: above 1e3 a 1 mm sensor bias at rest is no longer told from motion'),
     Param(E + 'model.F_s', 'float', 'N', 800.0, 0.0, 1.0e5,
           doc='friction bound of eq. 4.36 (thesis: 800 N; without stribeck_friction only)'),
     Param(E + 'model.v_eps', 'float', 'm/s', 1.0e-2, 1.0e-6, 0.1,

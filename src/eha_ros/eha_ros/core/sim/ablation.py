@@ -167,9 +167,9 @@ def _change(v, base):
 
 
 def verdict(result: dict, stage: str, tolerance: float = 0.05) -> str:
-    """'earns' when switching ``stage`` off (or a knob's variant) costs a passed run in some scenario or makes a
-    spec's worst figure worse by more than ``tolerance`` (relative: beyond noise);
-    'harmful' when off only gains passed runs; 'no effect' otherwise."""
+    """'earns' when switching ``stage`` off (or a knob's variant) costs a passed run in some
+    scenario or makes a spec's worst figure worse by more than ``tolerance`` (relative: beyond
+    noise); 'harmful' when off only gains passed runs; 'no effect' otherwise."""
     cells = result['rows'][stage].values()
     if any(c['passed'] < c['base_passed'] for c in cells) or any(
             s['worse'] and abs(s['change']) > tolerance for c in cells
