@@ -59,8 +59,19 @@ def knob_variants(texts: list) -> dict:
         except yaml.YAMLError:
             raise UsageError(f'--vary {text!r}: the values are not a YAML list') from None
         for v in vals:
-            out[f'{full[len("estimator."):]}={v}'] = {full: v}
+            out[f'{full[len("estimator."):]}={v}'] = {full: _number(v)}
     return out
+
+
+def _number(v):
+    """A YAML 1.1 string that is a number (1e-5) as that number; anything else as it is."""
+    if isinstance(v, str):
+        for kind in (int, float):
+            try:
+                return kind(v)
+            except ValueError:
+                pass
+    return v
 
 
 def scenario_files(scenarios: list, stage: str, folder: str,
