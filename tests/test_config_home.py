@@ -108,7 +108,7 @@ CASES = {
          '(1000000.0)']),
     **{f'estimator {k} above Nyquist': ('estimator', {f'{E}{k}': 400.0, **TS2},
                                         [f'estimator.{k} = 400.0', 'plant.sim.Ts = 0.002'])
-       for k in ('model.friction_lowpass', 'model.pressure_lowpass', 'monitor.lowpass')},
+       for k in ('model.friction_lowpass', 'monitor.lowpass')},
     'estimator unknown stage': ('estimator', {f'{E}stages': ['load_state', 'kalman_magic']},
                                 ["estimator.stages: unknown stage 'kalman_magic'",
                                  'sensor_offset']),

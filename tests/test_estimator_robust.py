@@ -190,7 +190,7 @@ def test_load_variation_tells_a_varying_load_from_a_held_one():
     the variance has built up; a 5 kN load step, held, and its removal never are (a step adds
     at most 1/16 of its square), nor is no load."""
     Ts, dp_load = 1e-3, 0.74e6
-    alphas = (Ts / 0.25, Ts / 2.0)            # offset_load_mean, offset_load_time (defaults)
+    alphas = (Ts / 0.25, Ts / adapt.LOAD_VARIANCE_TIME)     # offset_load_mean's default
     t = np.arange(6000) * Ts
     noise = 2e4 * np.random.default_rng(1).standard_normal(t.size)
 

@@ -57,6 +57,15 @@ VERDICTS = {OK: 'ok', SENSOR: 'sensor_fault', MODEL: 'model_mismatch',
 
 EDGE_TICKS = 200        # net updates with a clipped parameter that make an edge
 
+# Constants of the stages that were knobs until issue 44's knob ablation (scripts/ablation
+# --vary, random:50, tuning seed 1): x0.5 and x2 changed no passed run and no worst figure
+PRESSURE_LOWPASS = 30.0     # [Hz] low-pass of the measured p_D as a model input (friction,
+#                             leakage column)
+FLOW_REPORT = 2.0e-5        # [m/s] |v_f| reported as model_mismatch above it (flow_noise): the
+#                             load-step spec's steady error (20 um) per second
+LOAD_VARIANCE_TIME = 2.0    # [s] time constant of the pressure difference's variance about
+#                             its mean (load_variation)
+
 # piston-friction model constants (array fk) and state (array fs): :func:`friction_input`
 FK_AP, FK_DP, FK_CX, FK_CR, FK_PACC, FK_FC, FK_FS, FK_VS, FK_ALPHA, FK_ILAM, FK_IDEL, \
     FK_IPHI, FK_IEPS, FK_VREST, FK_NREST, FK_QREST = range(16)

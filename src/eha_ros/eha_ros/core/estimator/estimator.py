@@ -120,7 +120,7 @@ class Estimator:
         self.pressure_max = params[e + 'validity.pressure_max']
         self.max_abs_motor_speed = params[e + 'validity.max_abs_motor_speed']
         self.isolate = on(params, 'isolate')
-        self.alpha_pressure = adapt.lowpass_alpha(params[e + 'model.pressure_lowpass'], self.Ts)
+        self.alpha_pressure = adapt.lowpass_alpha(adapt.PRESSURE_LOWPASS, self.Ts)
         self.alpha_friction = adapt.lowpass_alpha(params[e + 'model.friction_lowpass'], self.Ts)
         self.detector = fd.FaultDetector.from_params(params, self.Ts)
         mk = np.zeros(adapt.NMK)                   # consistency monitor (adapt.monitor)
@@ -137,13 +137,13 @@ class Estimator:
         self.position_gm_sigma = params['plant.sensors.position_gm_sigma']
         self.q_flow, self.flow_gate = params[m + 'q_flow'], params[m + 'flow_gate']
         self.flow_ticks = round(params[m + 'flow_time'] / self.Ts)
-        self.flow_share, self.flow_report = params[m + 'flow_share'], params[m + 'flow_report']
+        self.flow_share, self.flow_report = params[m + 'flow_share'], adapt.FLOW_REPORT
         self.flow_s = np.zeros(adapt.NFLOW)       # adapt.flow_noise's state
         self.q_x_offset = params[m + 'q_x_offset']
         self.hold_rate = (self.Ts / params[m + 'hold_blend_time'] if on(params, 'hold_blend')
                           else 0.0)
-        self.alpha_load = tuple(self.Ts / params[m + key] for key in (
-            'offset_load_mean', 'offset_load_time'))
+        self.alpha_load = (self.Ts / params[m + 'offset_load_mean'],
+                           self.Ts / adapt.LOAD_VARIANCE_TIME)
         self.load_s = np.zeros(adapt.NLV)         # adapt.load_variation's state
         self.monitor_s = np.zeros(adapt.NMS)
         self.noise_k = self._noise_constants(params, pp) if self.chambers else None
@@ -186,7 +186,7 @@ class Estimator:
         d_p = noise_level.second_difference_power(p[s + 'pressure_sigma'], 0.0, 0.0, 0.0)
         lo, hi = p[e + 'adapt_range'][:2]
         return noise_level.constants(
-            self.Ts, p[e + 'adapt_time'], lo, hi, d_x, d_p, kf.R[0, 0],
+            self.Ts, noise_level.MEMORY, lo, hi, d_x, d_p, kf.R[0, 0],
             kf.R[1, 1] if kf.with_pressure else 0.0,
             kf.Q[kf.i_gm, kf.i_gm] if with_gm else 0.0, kf.i_gm,
             p[e + 'adapt_quiet_velocity'] * pp.A_p / pp.D_p)

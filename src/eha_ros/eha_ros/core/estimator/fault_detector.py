@@ -46,6 +46,11 @@ def pressure_z(y, S, m) -> float:
     return out
 
 
+# the CUSUM's allowance and debounce (knobs until issue 44: 0.25 / 1 and 2 / 10 samples
+# changed no campaign figure, random:50 seed 1)
+DRIFT_K = 0.5
+DRIFT_DEBOUNCE = 5
+
 # constants (FK_*) and state (FS_*) of one detector: its own two arrays, which the estimator's
 # compiled path (core.estimator.stepper) reads and writes in place through slices
 (FK_JUMP, FK_JUMP_N, FK_STUCK_N, FK_DRIFT_K, FK_DRIFT_H, FK_DRIFT_N, FK_HOLD, FK_JUMP_STEP,
@@ -138,8 +143,9 @@ class FaultDetector:
     Constants and state are the arrays ``k`` and ``s`` (FK_*, FS_*) of :func:`detect`."""
 
     def __init__(self, Ts: float, jump_threshold: float = 8.0, jump_debounce: int = 3,
-                 stuck_samples: int = 25, drift_k: float = 0.5,
-                 drift_h: float = 150.0, drift_debounce: int = 5, hold_time: float = 0.5,
+                 stuck_samples: int = 25, drift_k: float = DRIFT_K,
+                 drift_h: float = 150.0, drift_debounce: int = DRIFT_DEBOUNCE,
+                 hold_time: float = 0.5,
                  jump_step: float = 0.0, jump_pressure_veto: float = 1e300):
         self.Ts = Ts
         self.k = np.zeros(NFK)
@@ -153,9 +159,8 @@ class FaultDetector:
     def from_params(cls, p: dict, Ts: float) -> 'FaultDetector':
         f = 'estimator.fault.'
         return cls(Ts, p[f + 'jump_threshold'], p[f + 'jump_debounce'], p[f + 'stuck_samples'],
-                   p[f + 'drift_k'], p[f + 'drift_h'],
-                   p[f + 'drift_debounce'], p['estimator.hold_time'], p[f + 'jump_step'],
-                   p[f + 'jump_pressure_veto'])
+                   drift_h=p[f + 'drift_h'], hold_time=p['estimator.hold_time'],
+                   jump_step=p[f + 'jump_step'], jump_pressure_veto=p[f + 'jump_pressure_veto'])
 
     def reset(self):
         self.s[:] = 0.0

@@ -55,6 +55,8 @@ NNS = 14
 
 N0 = 100.0          # samples of weight the nominal prior carries
 CLIP = 3.0          # Huber limit, in RMS of d
+MEMORY = 5.0        # [s] memory of the level (a knob until issue 44: 2.5 and 10 s changed no
+#                     campaign figure, random:50 seed 1)
 
 
 def clipped_gain(c: float) -> float:

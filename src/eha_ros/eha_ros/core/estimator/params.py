@@ -149,9 +149,6 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.friction_lowpass', 'float', 'Hz', 50.0, 0.0, 500.0,
           doc='low-pass of the motor speed that gives eq. 4.36 its sign of xdot (0 = none): '
               'command chatter above it must not flip the modelled friction'),
-    Param(E + 'model.pressure_lowpass', 'float', 'Hz', 30.0, 0.1, 500.0,
-          doc='low-pass of the measured p_D used as a model input (friction, leakage column; '
-              'choice)'),
     Param(E + 'model.q', 'float[]', 'm^2, (m/s)^2, Pa^2', [1e-16, 1e-10, 1e6], 0.0, 1e20,
           min_len=3, doc='per-step process noise variances of x, xdot, p_D (p_D: eq4_35 only; '
                          'tuned, SIL)'),
@@ -195,15 +192,11 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.flow_share', 'float', '', 1.0, 0.0, 100.0,
           doc='bound of |v_f|: this x (C_x + C_r) (|p_A - p_B| - F_s (1 + phi_max) / A_p) / A_p, '
               'the nominal leakage of the pressure difference that friction cannot hold'),
-    Param(E + 'model.flow_report', 'float', 'm/s', 2e-5, 0.0, 1.0,
-          doc='|v_f| above this is reported as model_mismatch (a sensor drift under load looks '
-              'like a leak): the load-step spec\'s steady error (20 um) per second'),
     Param(E + 'model.offset_load_mean', 'float', 's', 0.25, 0.001, 100.0,
           doc='time constant of the pressure difference\'s mean (adapt.load_variation: is the '
-              'load varying? q_x_offset and the flow state ask) ...'),
-    Param(E + 'model.offset_load_time', 'float', 's', 2.0, 0.001, 100.0,
-          doc='... and of its variance about that mean (a load step adds at most '
-              'offset_load_mean/(2 offset_load_time) of its square: a held load is not varying)'),
+              'load varying? q_x_offset and the flow state ask; its variance about that mean '
+              'over adapt.LOAD_VARIANCE_TIME, 2 s: a load step adds at most offset_load_mean/'
+              '(2 x 2 s) of its square, a held load is not varying)'),
     Param(E + 'model.q_x_offset', 'float', 'm^2', 3e-10, 0.0, 1.0,
           doc='per-step position noise under a varying load (the pressure difference varying by '
               'more than F_s (1 + phi_max) / A_p rms about its mean: leakage and compressibility '
@@ -235,8 +228,6 @@ ESTIMATOR = Schema('estimator', [
           doc='sensor error band: a larger low-passed disagreement is DISAGREE '
               '(tune_estimator)'),
     Param(E + 'monitor.debounce', 'int', 'samples', 10, 1, 100000),
-    Param(E + 'noise.adapt_time', 'float', 's', 5.0, 0.01, 1e6,
-          doc='memory of the noise-level measurement'),
     Param(E + 'noise.adapt_range', 'float[]', '', [0.5, 3.0], 0.01, 100.0, min_len=2,
           doc='range of the measured noise level, relative to the sigmas of plant.sensors [lo, '
               'hi] (the random box reaches x2)'),
@@ -276,13 +267,10 @@ ESTIMATOR = Schema('estimator', [
           doc='identical consecutive readings of the noisy sensor that mean stuck (10 um '
               'noise, 1 um steps: 2.8 % per pair, 1e-14 for 10; was 25: 24 ms of a stuck '
               'reading pulled the estimate 0.2 mm before isolation)'),
-    Param(E + 'fault.drift_k', 'float', '', 0.5, 0.0, 100.0,
-          doc='CUSUM allowance on the normalised innovation'),
     Param(E + 'fault.drift_h', 'float', '', 300.0, 1.0, 1e9,
           doc='CUSUM alarm level (a 60 s nominal 1 Hz sine peaks near 10; 150 -> 300, issue '
               '15: the adaptive model converging after a 10 kN step reached 167; a sensor '
               'drift is reported by monitor DISAGREE, 1 mm/s in 0.28 s)'),
-    Param(E + 'fault.drift_debounce', 'int', 'samples', 5, 1, 10000),
     Param(E + 'chinniah.enabled', 'bool', '', False,
           doc='run the Chinniah 3-state/4-state friction estimators (eqs. 4.15-4.29) on the '
               'estimate'),
@@ -297,7 +285,7 @@ ESTIMATOR = Schema('estimator', [
 
 RANGES = ('model.leakage_range', 'model.external_leakage_range', 'model.displacement_range',
           'model.compliance_range', 'model.friction_range', 'noise.adapt_range')
-LOWPASS = ('model.friction_lowpass', 'model.pressure_lowpass', 'monitor.lowpass')
+LOWPASS = ('model.friction_lowpass', 'monitor.lowpass')
 
 
 def check_ranges(p: dict) -> None:
