@@ -253,8 +253,6 @@ ESTIMATOR = Schema('estimator', [
           doc='motor speeds beyond this are rejected (last good speed held; 1257 rad/s = '
               '12000 rpm)'),
     # position-sensor fault detector
-    Param(E + 'fault.jump_threshold', 'float', '', 8.0, 1.0, 1e6,
-          doc='|innovation| / sqrt(S) above this counts towards a jump'),
     Param(E + 'fault.jump_debounce', 'int', 'samples', 3, 1, 10000),
     Param(E + 'fault.jump_step', 'float', 'm', TUNED['fault.jump_step'], 0.0, 0.1,
           doc='a jump must begin with an innovation step of at least this within one sample '
