@@ -124,6 +124,16 @@ class Probe(probes.Probe):
     def arm(self, on=True):
         return self.call(self.arm_cli, self.SetBool.Request(data=on), 20, 20)
 
+    def arm_fresh(self, timeout=5.0):
+        """arm(True), asked again while it is refused for stale drive data (CI: the PLC task in
+        this process starved, the data went stale, refused for that, rightly) for up to
+        ``timeout`` s; the last answer."""
+        res, deadline = self.arm(True), time.monotonic() + timeout
+        while not res.success and 'stale' in res.message and time.monotonic() < deadline:
+            time.sleep(0.1)
+            res = self.arm(True)
+        return res
+
     def reset(self):
         return self.call(self.reset_cli, self.Trigger.Request(), 20, 20)
 
@@ -185,18 +195,14 @@ def test_not_armed_no_speed_reaches_plc(probe, peer):
     log = speeds_logged(peer, 0.0, lambda: probe.hold(300.0, 1.5))
     print(f'unarmed: {len(log)} PLC cycles, max |speed_ref| {np.max(np.abs(log[:, 1])):.3g} rad/s')
     assert len(log) > 300 and np.all(log[:, 1] == 0.0)
-    res = probe.arm(True)                            # the controller is not at rest: refused
-    deadline = time.monotonic() + 5.0
-    while not res.success and 'stale' in res.message and time.monotonic() < deadline:
-        time.sleep(0.1)           # CI: the PLC task in this process starved, the data went stale
-        res = probe.arm(True)     # (refused for that, rightly): ask again once it is fresh
+    res = probe.arm_fresh()                          # the controller is not at rest: refused
     assert not res.success and 'latest command 300.0 rad/s' in res.message
     assert abs(probe.states[-1].motor_speed[0]) < 5.0
 
 
 def test_armed_speed_reaches_plc_then_watchdog_zeroes_it(probe, peer):
     probe.hold(0.0, 0.2)
-    res = probe.arm(True)
+    res = probe.arm_fresh()
     assert res.success, res.message
     log = speeds_logged(peer, 0.3, lambda: probe.hold(100.0, 1.0))   # then commands stop
     t_last = probe.last_cmd_time
@@ -243,7 +249,8 @@ def test_second_plant_refused(probe, peer):
 
 def test_link_dropped_and_restored(probe, peer):
     probe.hold(0.0, 0.2)
-    assert probe.arm(True).success
+    res = probe.arm_fresh()
+    assert res.success, res.message
     peer.set_online(False)                       # the PLC stops answering (cable pulled)
     t0 = time.monotonic()
     assert probe.wait_diag(lambda d: d['link_fault_latched'] == 'True' and
@@ -257,12 +264,13 @@ def test_link_dropped_and_restored(probe, peer):
     assert probe.wait_diag(lambda d: d['link_up'] == 'True'), probe.diag()
     assert probe.diag()['link_fault_latched'] == 'True'              # latched after reconnect
     assert wait_for(lambda: probe.states[-1].valid, 10)
-    res = probe.arm(True)
+    res = probe.arm_fresh()
     assert not res.success and 'reset first' in res.message
     res = probe.reset()
     assert res.success, res.message
     assert probe.wait_diag(lambda d: d['link_fault_latched'] == 'False' and d['_level'] == 0)
-    assert probe.arm(True).success
+    res = probe.arm_fresh()
+    assert res.success, res.message
     log = speeds_logged(peer, 0.0, lambda: probe.hold(50.0, 0.5))
     assert np.max(log[:, 1]) == pytest.approx(50.0)                 # moving again
     probe.hold(0.0, 0.2)
