@@ -14,7 +14,7 @@ from eha_ros.core.sim import scenarios as SC
 
 
 def test_every_stage_switches_off_an_estimator_key_that_loads():
-    A.check_overrides(list(A.STAGES))
+    A.check_overrides(A.STAGES)
     for stage, over in A.STAGES.items():
         assert over and all(k.startswith('estimator.') for k in over), stage
 

@@ -123,10 +123,10 @@ def test_chamber_filter_matches_filterpy_joseph_form(params, measurements):
     p['estimator.measurements'] = measurements
     p = without(p, *(f'adapt_{k}' for k in ('leakage', 'displacement', 'compliance',
                                              'friction')))    # the plain KF (adaptive EKF:
-    p['estimator.model.offset_bound'] = 0.0                   # test_estimator_robust.py), no
-    p = without(p, 'flow_state')                              # projection, no unmodelled flow
-    kf = Estimator(p).kf
+    p = without(p, 'flow_state')                              # test_estimator_robust.py), no
+    kf = Estimator(p).kf                                      # unmodelled flow, no
     assert isinstance(kf, ChamberKF)
+    kf.offset_bound = 0.0                                     # projection
     kf.set_moved_gate(-1, 0.0)                               # and no gated offset
     f = KalmanFilter(dim_x=kf.n, dim_z=kf.H.shape[0], dim_u=3)
     f.Q, f.H, f.R = kf.Q, kf.H, kf.R
@@ -300,6 +300,10 @@ def test_bad_motor_speed_or_channel_holds_last_good_speed(params):
     est.update(0.0, [100.0, 0.0], 1e6, 1e6, 0)
     r = est.update(0.0, [float('nan'), 0.0], 1e6, 1e6, 0)
     assert r.rejected == 'motor_speed' and not r.update_skipped
+    limit = 1.5 * params['plant.drive.omega_max']     # not physical beyond 1.5 x the drive's
+    assert est.update(0.0, [-1.001 * limit, 0.0], 1e6, 1e6, 0).rejected == 'motor_speed'
+    assert est.update(0.0, [0.999 * limit, 0.0], 1e6, 1e6, 0).rejected == ''
+    est.update(0.0, [100.0, 0.0], 1e6, 1e6, 0)
     r = est.update(0.0, [100.0, 0.0], 1e6, 1e6, 7)
     assert r.rejected == 'channel'
     assert est.omega_prev == 100.0
@@ -325,6 +329,21 @@ def test_stale_predictions_are_provisional(params):
 
 
 # ---------------------------------------------------------------- Chinniah (sec. 4.1.2)
+def test_chinniah_is_a_stage_left_out_by_default(params):
+    """The Chinniah estimators run only when estimator.stages names them (an analysis, not in
+    the default list); then they see every updated sample."""
+    assert Estimator(params).chinniah is None
+    est = Estimator({**params, 'estimator.stages': [*params['estimator.stages'], 'chinniah']})
+    assert est.chinniah is not None
+    A_p, D_p, w = params['plant.cylinder.A_p'], params['plant.pump.D_p'], 2 * math.pi * 4
+    for k in range(2000):                     # a 4 Hz 3 mm sine, the pump's flow behind it
+        t = k * 1e-3
+        omega = A_p * 3e-3 * w * math.cos(w * t) / D_p
+        est.update(3e-3 * math.sin(w * t), [omega, 0.0], 20e5 + 2e5 * math.cos(w * t), 20e5, 0)
+    assert Estimator(params).friction_alphas is None
+    assert all(math.isfinite(a) for a in est.friction_alphas)
+
+
 def test_chinniah_alpha3_within_10_percent_after_2s_of_4hz_3mm_sine():
     """Simulated data with known friction (Table 4.1), 4 Hz 3 mm sine, thesis noise
     (position 1e-10 m^2, velocity 0.01 (m/s)^2, pressure 0.316 bar)."""

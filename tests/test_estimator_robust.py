@@ -383,15 +383,45 @@ def test_yaml_holds_the_tuning_derived_from_the_family(params):
     from eha_ros.core.qft.spec import load_spec
     spec = load_spec(os.path.join(ROOT, 'config', 'qft_spec.yaml'))
     fam = {n: tuple(spec[f'family.{n}_range']) for n in ('C_eq', 'D_p', 'beta', 'k_T', 'k_E')}
-    inp = tuning.Inputs(family=fam, position_sigma=params['plant.sensors.position_sigma'],
-                        gm_sigma=params['plant.sensors.position_gm_sigma'],
-                        gm_corner=params['plant.sensors.position_gm_corner'],
-                        A_p=params['plant.cylinder.A_p'],
-                        C_x=params['plant.pump.C_p'] + params['plant.cylinder.C_c'],
+    inp = tuning.Inputs(family=fam, C_x=params['plant.pump.C_p'] + params['plant.cylinder.C_c'],
                         C_r=params['plant.pump.C_r'])
     for key, v in tuning.derive(inp)['values'].items():
         want = [float(T.fmt(a)) for a in v] if isinstance(v, list) else float(T.fmt(v))
         assert params['estimator.' + key] == pytest.approx(want, rel=1e-12), key
+
+
+def test_sensor_bands_follow_the_sensor_model(params):
+    """The offset bound, DISAGREE band and jump step come from plant.sensors at run time: the
+    datasheet's 10 um white and 20 um Gauss-Markov sensor gives the values tune_estimator
+    wrote before (253, 214, 141 um), a sensor twice as noisy bands twice as wide, and the
+    noise scale is the random box's largest."""
+    from eha_ros.core.estimator import sensor_band as SB
+    from eha_ros.core.qft.family_box import load_box
+    b = SB.from_params(params)
+    assert (b.offset_bound, b.band, b.jump_step) == pytest.approx((2.532e-4, 2.1362e-4,
+                                                                    1.4142e-4), rel=2e-4)
+    assert SB.NOISE_SCALE == load_box()['noise'][1]
+    s = 'plant.sensors.'
+    loud = SB.from_params({**params, s + 'position_sigma': 2 * params[s + 'position_sigma'],
+                           s + 'position_gm_sigma': 2 * params[s + 'position_gm_sigma']})
+    assert (loud.offset_bound, loud.band, loud.jump_step) == pytest.approx(
+        (2 * b.offset_bound, 2 * b.band, 2 * b.jump_step), rel=1e-12)
+    est = Estimator({**params, s + 'position_gm_sigma': 2 * params[s + 'position_gm_sigma']})
+    assert est.kf.offset_bound == pytest.approx(2 * b.offset_bound, rel=1e-12)
+    assert est.monitor_k[adapt.MK_BAND] > b.band
+
+
+def test_drifting_states_walk_their_family_sigma_in_the_drift_time(params):
+    """q of a drifting adaptive state is p0 Ts / drift_time (its family sigma in drift_time),
+    the displacement's and friction's 0; the filter's Q carries it."""
+    from eha_ros.core.estimator.params import DRIFTING, drift_q
+    m, ts = 'estimator.model.', params['plant.sim.Ts']
+    for name in ('leakage', 'external_leakage', 'compliance', 'displacement', 'friction'):
+        want = params[m + f'p0_{name}'] * ts / params[m + 'drift_time'] if name in DRIFTING else 0
+        assert drift_q(params, name) == want, name
+    kf = Estimator({**params, m + 'drift_time': 1e3}).kf
+    assert kf.Q[kf.i_compliance, kf.i_compliance] == pytest.approx(
+        params[m + 'p0_compliance'] * ts / 1e3, rel=1e-12)
 
 
 # ------------------------------------------------------------------ why the friction model

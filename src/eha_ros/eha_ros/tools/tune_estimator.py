@@ -1,7 +1,8 @@
-"""tune_estimator: derive the estimator's adaptive-state noise, projection ranges, sensor band
-and jump step from the Table 4.5 family and the sensor model (core.estimator.tuning), print
-them, and with --write put them into their one home: the TUNED table of
-core/estimator/params.py, the defaults of those estimator.* keys (no YAML file restates them).
+"""tune_estimator: derive the estimator's adaptive-state variances and projection ranges from
+the Table 4.5 family and the robustness box (core.estimator.tuning), print them, and with
+--write put them into their one home: the TUNED table of core/estimator/params.py, the
+defaults of those estimator.* keys (no YAML file restates them). Also printed: the sensor
+bands the estimator derives at run time from plant.sensors (core.estimator.sensor_band).
 
 It reads no noise seed. A tuning is checked with campaigns on the tuning seeds 1-5
 (scripts/campaign ... --seeds tuning); the figures of record come from the held-out seeds
@@ -13,7 +14,8 @@ import os
 import sys
 
 from ..core.config.cli import guarded
-from ..core.estimator import tuning
+from ..core.estimator import sensor_band, tuning
+from ..core.estimator.params import ESTIMATOR
 from ..core.config.params import default_config_dir, load
 from ..core.plant.parameters import PLANT_SCHEMA
 from ..core.qft.spec import load_spec
@@ -31,14 +33,14 @@ def parse(argv):
     ap.add_argument('--spec', default=os.path.join(cfg, 'qft_spec.yaml'),
                     help='family ranges (family.*_range), default config/qft_spec.yaml')
     ap.add_argument('--plant', default=os.path.join(cfg, 'plant.yaml'),
-                    help='sensor model (plant.sensors.*)')
+                    help='nominal plant: its leakage and sensor model (plant.sensors.*)')
     ap.add_argument('--out', default=PARAMS_PY,
                     help='Python file with the TUNED table (default: core/estimator/params.py)')
     ap.add_argument('--write', action='store_true',
                     help='rewrite the TUNED table of --out in place')
-    d = tuning.Inputs(family={})
-    for name in ('T_op', 'p_fa', 'margin', 'rho', 'T_memory', 'monitor_lowpass', 'jump_k'):
-        ap.add_argument('--' + name.replace('_', '-'), type=float, default=getattr(d, name))
+    ap.add_argument('--margin', type=float, default=tuning.Inputs(family={}).margin,
+                    help='projection range widening, a fraction of the span on each side '
+                         '(default %(default)s)')
     return ap.parse_args(argv)
 
 
@@ -78,21 +80,17 @@ def main(argv=None) -> int:
     spec = load_spec(a.spec)
     pp = load(PLANT_SCHEMA, [a.plant])
     fam = {n: tuple(spec[f'family.{n}_range']) for n in ('C_eq', 'D_p', 'beta', 'k_T', 'k_E')}
-    n = 1
-    for name in fam:
-        n *= spec[f'family.{name}_n']
-    s = 'plant.sensors.'
-    inp = tuning.Inputs(family=fam, Ts=pp['plant.sim.Ts'], position_sigma=pp[s + 'position_sigma'],
-                        gm_sigma=pp[s + 'position_gm_sigma'],
-                        gm_corner=pp[s + 'position_gm_corner'],
-                        n_plants=n, T_op=a.T_op, p_fa=a.p_fa, margin=a.margin, rho=a.rho,
-                        T_memory=a.T_memory, monitor_lowpass=a.monitor_lowpass, jump_k=a.jump_k,
-                        A_p=pp['plant.cylinder.A_p'],
+    inp = tuning.Inputs(family=fam, margin=a.margin,
                         C_x=pp['plant.pump.C_p'] + pp['plant.cylinder.C_c'],
                         C_r=pp['plant.pump.C_r'])
     res = tuning.derive(inp)
     for line in res['notes']:
         print(line)
+    b = sensor_band.from_params({**pp, 'estimator.monitor.lowpass': ESTIMATOR.defaults()[
+        'estimator.monitor.lowpass']})
+    print(f'sensor bands (at run time from plant.sensors, x{sensor_band.NOISE_SCALE:g} noise, '
+          f'{b.z:.2f} sigma): offset bound {b.offset_bound * 1e6:.0f} um, DISAGREE band '
+          f'{b.band * 1e6:.0f} um, jump step {b.jump_step * 1e6:.0f} um')
     for k, v in res['values'].items():
         print(f'estimator.{k}: {fmt(v)}')
     if a.write:

@@ -26,8 +26,13 @@ from . import noise_level
 from . import stepper
 from .chamber_kf import ChamberKF
 from .model_kf import ModelKF
-from .params import DRIFTING, on
+from . import sensor_band
+from .params import drift_q, on
 from .pva import PvaKF
+
+# a motor-speed reading beyond this times the drive's speed reference limit
+# (plant.drive.omega_max, 8000 rpm) is not physical: rejected, the last good one held
+MOTOR_SPEED_MARGIN = 1.5
 
 
 @dataclass
@@ -53,10 +58,10 @@ def build_filter(p: dict):
     model KF of eq. 4.35 (model_kf) or the PVA filter of eq. 4.30-4.34."""
     pp = PlantParams.from_dict(p)
     e = 'estimator.'
-    if p[e + 'filter'] == 'pva':
-        return PvaKF(pp.Ts, p[e + 'pva.W'], p[e + 'pva.R'], p[e + 'pva.p0'])
     s = 'plant.sensors.'                      # the sensor model: R and the offset state
     sig, gm_sig = p[s + 'position_sigma'], p[s + 'position_gm_sigma']
+    if p[e + 'filter'] == 'pva':
+        return PvaKF(pp.Ts, p[e + 'pva.W'], sig ** 2 + gm_sig ** 2, p[e + 'pva.p0'])
     gm = (gm_sig, p[s + 'position_gm_corner']) if on(p, 'sensor_offset') else None
     R_pos = sig ** 2 if gm else sig ** 2 + gm_sig ** 2
     with_p = p[e + 'measurements'] == 'position_pressure'
@@ -65,9 +70,8 @@ def build_filter(p: dict):
         m = e + 'model.'
         # the adaptive flow parameters need the measured pressures (the flow balance): none
         # with position-only measurements, where they are unobservable
-        lam, dlt, kap, phi, eps = (((p[m + 'q_' + k] if k in DRIFTING else 0.0,
-                                     p[m + 'p0_' + k], *p[m + k + '_range'])
-                                    if on(p, 'adapt_' + k) and with_p else None)
+        lam, dlt, kap, phi, eps = ((drift_q(p, k), p[m + 'p0_' + k], *p[m + k + '_range'])
+                                   if on(p, 'adapt_' + k) and with_p else None
                                    for k in ('leakage', 'displacement', 'compliance', 'friction',
                                              'external_leakage'))
         fric = None
@@ -82,7 +86,7 @@ def build_filter(p: dict):
                        q_load=p[e + 'model.q_load'] if on(p, 'load_state') else None,
                        p0_load=p[e + 'model.p0_load'], leakage=lam, displacement=dlt,
                        compliance=kap, adapt_gate=p[m + 'adapt_gate'],
-                       offset_bound=p[m + 'offset_bound'] if gm else 0.0,
+                       offset_bound=sensor_band.from_params(p).offset_bound if gm else 0.0,
                        friction=fric, friction_scale=phi, external=eps,
                        flow=on(p, 'flow_state') and with_p)
         kf.friction_uses_pressure = p[e + 'model.friction_pressure']
@@ -118,14 +122,14 @@ class Estimator:
         self.x_max = 0.5 * pp.stroke + params[e + 'validity.position_margin']
         self.pressure_min = params[e + 'validity.pressure_min']
         self.pressure_max = params[e + 'validity.pressure_max']
-        self.max_abs_motor_speed = params[e + 'validity.max_abs_motor_speed']
+        self.max_abs_motor_speed = MOTOR_SPEED_MARGIN * params['plant.drive.omega_max']
         self.isolate = on(params, 'isolate')
         self.alpha_pressure = adapt.lowpass_alpha(adapt.PRESSURE_LOWPASS, self.Ts)
         self.alpha_friction = adapt.lowpass_alpha(params[e + 'model.friction_lowpass'], self.Ts)
         self.detector = fd.FaultDetector.from_params(params, self.Ts)
         mk = np.zeros(adapt.NMK)                   # consistency monitor (adapt.monitor)
         mk[adapt.MK_ALPHA] = adapt.lowpass_alpha(params[e + 'monitor.lowpass'], self.Ts)
-        mk[adapt.MK_BAND] = params[e + 'monitor.band']
+        mk[adapt.MK_BAND] = sensor_band.from_params(params).band
         mk[adapt.MK_N] = params[e + 'monitor.debounce']
         mk[adapt.MK_HOLD] = int(round(params[e + 'hold_time'] / self.Ts))
         self.monitor_k = mk
@@ -150,9 +154,9 @@ class Estimator:
         self.noise_s = np.zeros(noise_level.NNS)
         self.noise_s[[noise_level.NS_SX, noise_level.NS_SP]] = 1.0   # datasheet's unless measured
         self.chinniah = None
-        if params[e + 'chinniah.enabled']:
-            from .chinniah import Chinniah3, Chinniah4
-            self.chinniah = (Chinniah3(pp.m_p, pp.A_p, self.Ts), Chinniah4(pp.m_p, pp.A_p, self.Ts))
+        if on(params, 'chinniah'):
+            from .chinniah import ChinniahEstimator
+            self.chinniah = ChinniahEstimator(pp.m_p, pp.A_p, self.Ts)
         self.counters = Counters()
         self.max_gap_ticks = 1000       # a longer gap is predicted over at most 1 s
         # the compiled tick's constants, state and arrays (core.estimator.stepper): the state
@@ -289,7 +293,7 @@ class Estimator:
         if pos_ok and not (self.isolate and fault_before in (fd.JUMP, fd.STUCK)):
             _, y, nis, m, _ = self._estimate(*self.kernel, position, w, pressure_a, pressure_b)
             if self.chinniah is not None and pr_ok:
-                self._chinniah_step(position)
+                self.chinniah.step(position, self.kf.velocity, self.pd_meas)
             return self._result(y, nis, False, ','.join(reasons), m)
         self._advance(*self.kernel, w, pressure_a, pressure_b)
         noise_level.gap(self.noise_s)
@@ -352,11 +356,6 @@ class Estimator:
         self.detector.tick_without_sample()
         return self._result(0.0, 0.0, True, 'stale', 0)
 
-    def _chinniah_step(self, position: float):
-        c3, c4 = self.chinniah
-        c3.step(position, self.kf.velocity, self.pd_meas, c4.alpha1, c4.alpha2)
-        c4.step(position, self.kf.velocity, self.pd_meas, c3.alpha3)
-
     def _result(self, innovation, nis, skipped, rejected, m) -> EstimateResult:
         kf = self.kf
         pd = kf.pressure_diff if self.is_model else self.pd_meas
@@ -368,6 +367,4 @@ class Estimator:
     @property
     def friction_alphas(self):
         """(alpha_1, alpha_2, alpha_3) of the Chinniah pair, or None when disabled."""
-        if self.chinniah is None:
-            return None
-        return self.chinniah[1].alpha1, self.chinniah[1].alpha2, self.chinniah[0].alpha3
+        return None if self.chinniah is None else self.chinniah.alphas

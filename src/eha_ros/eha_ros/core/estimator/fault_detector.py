@@ -30,6 +30,8 @@ import math
 import numpy as np
 from numba import njit
 
+from . import sensor_band
+
 NONE, JUMP, STUCK, DRIFT = 0, 1, 2, 3
 VETO_SAMPLES = 2        # a jump's samples whose pressure innovation can veto it (see above)
 NAMES = {NONE: 'none', JUMP: 'jump', STUCK: 'stuck', DRIFT: 'drift'}
@@ -162,7 +164,8 @@ class FaultDetector:
         f = 'estimator.fault.'
         return cls(Ts, jump_debounce=p[f + 'jump_debounce'], stuck_samples=p[f + 'stuck_samples'],
                    drift_h=p[f + 'drift_h'], hold_time=p['estimator.hold_time'],
-                   jump_step=p[f + 'jump_step'], jump_pressure_veto=p[f + 'jump_pressure_veto'])
+                   jump_step=sensor_band.from_params(p).jump_step,
+                   jump_pressure_veto=p[f + 'jump_pressure_veto'])
 
     def reset(self):
         self.s[:] = 0.0

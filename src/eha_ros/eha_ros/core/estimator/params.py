@@ -2,6 +2,8 @@
 config/plant.yaml (the model of eq. 4.35 is built from the same plant parameters)."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from ..config.params import Param, ParamError, Schema, _chain
 from ..plant.parameters import PLANT_SCHEMA
 
@@ -9,90 +11,104 @@ BAR = 1.0e5
 E = 'estimator.'
 
 
-# The numbers tools/tune_estimator derives from the Table 4.5 family, the robustness box and
-# the sensor model (core.estimator.tuning): their one home, rewritten by tune_estimator --write.
+# The numbers tools/tune_estimator derives from the Table 4.5 family and the robustness box
+# (core.estimator.tuning): their one home, rewritten by tune_estimator --write. (The sensor's
+# bands follow from plant.sensors at run time: core.estimator.sensor_band.)
 # BEGIN tune_estimator
 TUNED = {
     'model.p0_leakage': 6.236,
-    'model.q_leakage': 6.2362e-09,
     'model.leakage_range': [-0.99, 30.41],
     'model.p0_external_leakage': 6.236,
-    'model.q_external_leakage': 6.2362e-09,
     'model.external_leakage_range': [-0.99, 36.5],
     'model.p0_displacement': 0.003331,
     'model.displacement_range': [-0.325, 0.125],
     'model.p0_compliance': 0.04218,
-    'model.q_compliance': 4.2185e-11,
     'model.compliance_range': [-0.5833, 0.9167],
     'model.p0_friction': 0.1818,
     'model.friction_range': [-0.875, 1.375],
-    'model.offset_bound': 0.0002532,
-    'monitor.band': 0.00021362,
-    'monitor.lowpass': 5.0,
-    'fault.jump_step': 0.00014142,
 }
 # END tune_estimator
 
 
 # the adaptive states whose parameters drift in service (viscosity, air, temperature move both
-# leakage paths and the bulk modulus): a random walk q_<name>; the displacement is geometry and
-# the friction Table 3.7's, constant for a plant (no random walk: core.estimator.tuning)
+# leakage paths and the bulk modulus): a random walk of model.drift_time; the displacement is
+# geometry and the friction Table 3.7's, constant for a plant (no random walk)
 DRIFTING = ('leakage', 'external_leakage', 'compliance')
 
 
-def _adaptive(name, symbol, q_max, p0_max, lo, hi) -> list:
+def _adaptive(name, symbol, p0_max, lo, hi) -> list:
     """The parameters of the adaptive model state of stage adapt_<name> (core.estimator.adapt):
-    random walk q_<name> (a DRIFTING one only), initial variance p0_<name> and projection range
-    (defaults: TUNED)."""
+    initial variance p0_<name> and projection range (defaults: TUNED)."""
     m = E + 'model.'
-    walk = [Param(m + f'q_{name}', 'float', '', TUNED[f'model.q_{name}'], 0.0, q_max,
-                  doc=f'per-step random-walk variance of {symbol}')] if name in DRIFTING else []
-    return [*walk,
-            Param(m + f'p0_{name}', 'float', '', TUNED[f'model.p0_{name}'], 0.0, p0_max,
-                  doc=f'initial variance of {symbol} (family spread)'),
+    return [Param(m + f'p0_{name}', 'float', '', TUNED[f'model.p0_{name}'], 0.0, p0_max,
+                  doc=f'initial variance of {symbol} (its spread over the family)'),
             Param(m + f'{name}_range', 'float[]', '', TUNED[f'model.{name}_range'], lo, hi,
                   min_len=2, doc=f'projection range of {symbol} [lo, hi]')]
 
 
-# The stages the estimator adds to the Kalman filter of eq. 4.35 (docs/nodes/estimator.md), in
-# the order they run; estimator.stages lists the ones that run (all by default): name -> what
-# it adds. "chambers": the chamber-pressure structure only.
+def drift_q(p: dict, name: str) -> float:
+    """Per-step random-walk variance of adaptive state ``name``: p0_<name> Ts / drift_time for
+    a DRIFTING one (its family sigma in drift_time), 0 for the others."""
+    m = E + 'model.'
+    if name not in DRIFTING:
+        return 0.0
+    return p[m + f'p0_{name}'] * p['plant.sim.Ts'] / p[m + 'drift_time']
+
+
+@dataclass(frozen=True)
+class Stage:
+    """A stage the estimator adds to the Kalman filter of eq. 4.35: what it adds, the filter
+    structure it belongs to (None: any model structure) and whether it runs by default."""
+
+    doc: str
+    structure: str | None = None
+    default: bool = True
+
+
+# The stages, in the order they run (docs/nodes/estimator.md); estimator.stages lists the ones
+# that run (the default ones unless set).
 STAGES = {
-    'sensor_offset': "the position sensor's low-frequency (Gauss-Markov) offset b as a state "
-                     "(coloured noise, Fig. 4.6)",
-    'load_state': 'an external-force state (random walk): a static load balances the measured '
-                  'pressures instead of biasing x (23 kN: 26 um vs 251 um without)',
-    'leak_state': 'eq4_35 structure only: a leakage-coefficient correction state (1e-12 m^3/(s '
-                  'Pa) units): the boost check valves make C_eff != C_eq',
-    'adapt_leakage': 'chambers: relative leakage correction lambda as a state (C_p + C_c x '
-                     '(1+lambda); every leakage without adapt_external_leakage)',
-    'adapt_external_leakage': 'chambers: relative correction epsilon of the per-port leakage '
-                              'C_r as a state (C_r x (1+epsilon)); lambda then scales the '
-                              'cross-port C_p + C_c only',
-    'adapt_displacement': 'chambers: relative displacement correction delta as a state (D_p x '
-                          '(1+delta))',
-    'adapt_compliance': 'chambers: relative compliance correction kappa as a state (V_d/beta x '
-                        '(1+kappa))',
-    'adapt_friction': 'chambers with stribeck_friction: relative friction correction phi as a '
-                      'state (F_c, F_s x (1+phi))',
-    'flow_state': 'chambers with stribeck_friction: an unmodelled flow v_f (velocity units, A_p '
-                  'v_f into A, out of B) as a state, opened at rest while the sensor offset is '
-                  'implausible, bounded by the leakage of the pressure difference beyond '
-                  'friction (adapt.flow_noise): a persistent velocity bias at rest is not a '
-                  'sensor offset (issue 15)',
-    'stribeck_friction': 'chambers: the piston friction of the model is the plant curve of eq. '
-                         '3.33 (plant.friction F_c, F_s, v_s; Table 3.7) at the pump-flow '
-                         'velocity, low-passed at friction_lowpass (adapt.friction_input); '
-                         'without it (and in the eq4_35 structure) eq. 4.36: -sign(xdot) '
-                         'min(|p_D A_p|, F_s) with F_s, v_eps',
-    'noise_level': "chambers: measure the position and pressure sensors' noise level online "
-                   "and scale R (and the Gauss-Markov state's q) by it (second differences of "
-                   "its readings; core.estimator.noise_level, issue 15)",
-    'hold_blend': 'while the piston rests under a held load, publish the sensor reading '
-                  'without its white noise, x_hat + b (model.hold_blend_time)',
-    'isolate': 'skip the position update (predict only, adapted model) while a sensor fault '
-               '(jump or stuck) is reported',
+    'sensor_offset': Stage("the position sensor's low-frequency (Gauss-Markov) offset b as a "
+                           "state (coloured noise, Fig. 4.6)"),
+    'load_state': Stage('an external-force state (random walk): a static load balances the '
+                        'measured pressures instead of biasing x (23 kN: 26 um vs 251 um '
+                        'without)'),
+    'leak_state': Stage('a leakage-coefficient correction state (1e-12 m^3/(s Pa) units): the '
+                        'boost check valves make C_eff != C_eq', 'eq4_35'),
+    'adapt_leakage': Stage('relative leakage correction lambda as a state (C_p + C_c x (1+'
+                           'lambda); every leakage without adapt_external_leakage)', 'chambers'),
+    'adapt_external_leakage': Stage('relative correction epsilon of the per-port leakage C_r '
+                                    'as a state (C_r x (1+epsilon)); lambda then scales the '
+                                    'cross-port C_p + C_c only', 'chambers'),
+    'adapt_displacement': Stage('relative displacement correction delta as a state (D_p x '
+                                '(1+delta))', 'chambers'),
+    'adapt_compliance': Stage('relative compliance correction kappa as a state (V_d/beta x '
+                              '(1+kappa))', 'chambers'),
+    'adapt_friction': Stage('with stribeck_friction: relative friction correction phi as a '
+                            'state (F_c, F_s x (1+phi))', 'chambers'),
+    'flow_state': Stage('with stribeck_friction: an unmodelled flow v_f (velocity units, A_p '
+                        'v_f into A, out of B) as a state, opened at rest while the sensor '
+                        'offset is implausible, bounded by the leakage of the pressure '
+                        'difference beyond friction (adapt.flow_noise): a persistent velocity '
+                        'bias at rest is not a sensor offset (issue 15)', 'chambers'),
+    'stribeck_friction': Stage('the piston friction of the model is the plant curve of eq. '
+                               '3.33 (plant.friction F_c, F_s, v_s; Table 3.7) at the '
+                               'pump-flow velocity, low-passed at friction_lowpass '
+                               '(adapt.friction_input); without it (and in the eq4_35 '
+                               'structure) eq. 4.36: -sign(xdot) min(|p_D A_p|, F_s) with F_s, '
+                               'v_eps', 'chambers'),
+    'noise_level': Stage("measure the position and pressure sensors' noise level online and "
+                         "scale R (and the Gauss-Markov state's q) by it (second differences "
+                         "of its readings; core.estimator.noise_level, issue 15)", 'chambers'),
+    'hold_blend': Stage('while the piston rests under a held load, publish the sensor reading '
+                        'without its white noise, x_hat + b (model.hold_blend_time)'),
+    'isolate': Stage('skip the position update (predict only, adapted model) while a sensor '
+                     'fault (jump or stuck) is reported'),
+    'chinniah': Stage('run the Chinniah 3-state and 4-state friction estimators (eqs. '
+                      '4.15-4.29) on the estimate (analysis; not in the default list)',
+                      default=False),
 }
+DEFAULT_STAGES = [k for k, v in STAGES.items() if v.default]
 
 
 def on(p: dict, stage: str) -> bool:
@@ -110,9 +126,10 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'filter', 'str', '', 'model', choices=('model', 'pva'),
           doc='model = eq. 4.35 model-based KF; pva = position-velocity-acceleration KF '
               '(eqs. 4.30-4.34)'),
-    Param(E + 'stages', 'str[]', '', list(STAGES), min_len=1,
+    Param(E + 'stages', 'str[]', '', DEFAULT_STAGES, min_len=1,
           doc='the stages that run beyond the Kalman filter of eq. 4.35, any of: ' + '; '.join(
-              f'{k} = {v}' for k, v in STAGES.items()) + ". [''] = none: the filter alone"),
+              f'{k} = {v.structure + " structure only: " if v.structure else ""}{v.doc}'
+              for k, v in STAGES.items()) + ". [''] = none: the filter alone"),
     Param(E + 'hold_time', 'float', 's', 0.5, 0.0, 100.0,
           doc='a consistency verdict (monitor) or a detected sensor fault (fault) stays '
               'reported this long after its condition clears'),
@@ -176,11 +193,18 @@ ESTIMATOR = Schema('estimator', [
     # projected onto their ranges. Defaults: TUNED (p0, q, ranges DERIVED by
     # tools/tune_estimator from the Table 4.5 family + box and the sensor model,
     # core.estimator.tuning).
-    *_adaptive('leakage', 'lambda', 1e6, 1e6, -1.0, 1e3),
-    *_adaptive('external_leakage', 'epsilon', 1e6, 1e6, -1.0, 1e3),
-    *_adaptive('displacement', 'delta', 1.0, 1.0, -0.9, 1.0),
-    *_adaptive('compliance', 'kappa', 1.0, 10.0, -0.9, 10.0),
-    *_adaptive('friction', 'phi', 1.0, 10.0, -0.99, 10.0),
+    *_adaptive('leakage', 'lambda', 1e6, -1.0, 1e3),
+    *_adaptive('external_leakage', 'epsilon', 1e6, -1.0, 1e3),
+    *_adaptive('displacement', 'delta', 1.0, -0.9, 1.0),
+    *_adaptive('compliance', 'kappa', 10.0, -0.9, 10.0),
+    *_adaptive('friction', 'phi', 10.0, -0.99, 10.0),
+    Param(E + 'model.drift_time', 'float', 's', 1.0e6, 1.0, 1e15,
+          doc='a drifting adaptive state (leakage, external_leakage, compliance: viscosity, '
+              'entrained air and temperature move them in service) may random-walk by its '
+              'family sigma sqrt(p0_<name>) in this time: q = p0_<name> Ts / drift_time per '
+              'step (10 % of the spread in the 1e4 s of an oil warm-up; nominal 1 Hz sine, '
+              'seeds 1-4, goal 0.25: worst RMSE ratio 0.249 at 1e6 s, 0.255 at 1e5 s, 0.27 at '
+              '1e4 s)'),
     Param(E + 'model.q_flow', 'float', '(m/s)^2', 1e-9, 0.0, 1.0,
           doc='per-step random walk of v_f while open (closed: 0)'),
     Param(E + 'model.flow_gate', 'float', '', 2.0, 0.0, 1e6,
@@ -215,18 +239,12 @@ ESTIMATOR = Schema('estimator', [
               '(an unknown load step) must not be taken for a parameter change'),
     Param(E + 'model.q_x_disagree', 'float', 'm^2', 1e-8, 0.0, 1.0,
           doc='per-step position process noise while filter and sensor disagree beyond the '
-              'band (monitor.band): the estimate is pulled back to the measurement'),
-    Param(E + 'model.offset_bound', 'float', 'm', TUNED['model.offset_bound'], 0.0, 0.01,
-          doc='projection bound of the sensor Gauss-Markov offset state |b| (0: none): the '
-              'estimate stays within it of the measurement'),
+              'DISAGREE band (core.estimator.sensor_band): the estimate is pulled back to the measurement'),
     # consistency monitor (core.estimator.adapt.monitor), verdict: ok | model_mismatch |
     # sensor_fault | filter_sensor_disagree
-    Param(E + 'monitor.lowpass', 'float', 'Hz', TUNED['monitor.lowpass'], 0.01, 500.0,
-          doc='low-pass of the measurement-minus-estimate disagreement z - x_hat '
-              '(tune_estimator)'),
-    Param(E + 'monitor.band', 'float', 'm', TUNED['monitor.band'], 1e-7, 0.1,
-          doc='sensor error band: a larger low-passed disagreement is DISAGREE '
-              '(tune_estimator)'),
+    Param(E + 'monitor.lowpass', 'float', 'Hz', 5.0, 0.01, 500.0,
+          doc='low-pass of the measurement-minus-estimate disagreement z - x_hat (its DISAGREE '
+              'band follows from plant.sensors: core.estimator.sensor_band)'),
     Param(E + 'monitor.debounce', 'int', 'samples', 10, 1, 100000),
     Param(E + 'noise.adapt_range', 'float[]', '', [0.5, 3.0], 0.01, 100.0, min_len=2,
           doc='range of the measured noise level, relative to the sigmas of plant.sensors [lo, '
@@ -237,9 +255,9 @@ ESTIMATOR = Schema('estimator', [
               '3 mm sine chatters above ~35 mm/s)'),
     # PVA filter, eq. 4.30-4.34
     Param(E + 'pva.W', 'float', 'm^2/s^5', 100.0, 1e-12, 1e12,
-          doc='jerk noise intensity W, eq. 4.32, appendix C.4'),
-    Param(E + 'pva.R', 'float', 'm^2', 5.0e-10, 1e-16, 1.0,
-          doc='position noise variance, eq. 4.33 (which prints 2.5e-8 for the bench MSP)'),
+          doc='jerk noise intensity W, eq. 4.32, appendix C.4 (R, eq. 4.33: the position '
+              'sensor\'s variance, plant.sensors position_sigma^2 + position_gm_sigma^2; the '
+              'thesis prints 2.5e-8 for the bench MSP)'),
     Param(E + 'pva.p0', 'float[]', 'm^2, (m/s)^2, (m/s^2)^2', [1e-6, 1e-2, 1e2], 0.0, 1e20,
           min_len=3, doc='initial variances, eq. 4.34 (which prints 100, 10, 100)'),
     # measurement validity
@@ -249,15 +267,8 @@ ESTIMATOR = Schema('estimator', [
           doc='pressure sensor range, gauge: lowest accepted reading (0 bar)'),
     Param(E + 'validity.pressure_max', 'float', 'Pa', 400.0 * BAR, 1e5, 1e9,
           doc='highest accepted pressure reading (400 bar)'),
-    Param(E + 'validity.max_abs_motor_speed', 'float', 'rad/s', 1257.0, 1.0, 1e5,
-          doc='motor speeds beyond this are rejected (last good speed held; 1257 rad/s = '
-              '12000 rpm)'),
     # position-sensor fault detector
     Param(E + 'fault.jump_debounce', 'int', 'samples', 3, 1, 10000),
-    Param(E + 'fault.jump_step', 'float', 'm', TUNED['fault.jump_step'], 0.0, 0.1,
-          doc='a jump must begin with an innovation step of at least this within one sample '
-              '(0: any); a smooth large innovation is a model mismatch, not a sensor jump '
-              '(tune_estimator)'),
     Param(E + 'fault.jump_pressure_veto', 'float', '', 8.0, 0.0, 1e300,
           doc='no jump when a pressure innovation of a debounce sample is above this '
               '(normalised): the piston moved by compressing the oil, the sensor did not jump'),
@@ -269,9 +280,6 @@ ESTIMATOR = Schema('estimator', [
           doc='CUSUM alarm level (a 60 s nominal 1 Hz sine peaks near 10; 150 -> 300, issue '
               '15: the adaptive model converging after a 10 kN step reached 167; a sensor '
               'drift is reported by monitor DISAGREE, 1 mm/s in 0.28 s)'),
-    Param(E + 'chinniah.enabled', 'bool', '', False,
-          doc='run the Chinniah 3-state/4-state friction estimators (eqs. 4.15-4.29) on the '
-              'estimate'),
     # node
     Param(E + 'node.stale_time', 'float', 's', 0.005, 1e-4, 10.0,
           doc='no state for longer than this: publish predict-only estimates marked stale'),
@@ -300,11 +308,11 @@ def check_ranges(p: dict) -> None:
 
 
 def check_sensor_model(p: dict) -> None:
-    """The sensor model the filter's R comes from (plant.sensors position_sigma, pressure_sigma)
-    has noise: a zero sigma would make R singular (the model filters)."""
-    if p[E + 'filter'] != 'model':
-        return
-    for key, least in (('position_sigma', 1e-9), ('pressure_sigma', 1.0)):
+    """The sensor model the filter's R comes from (plant.sensors position_sigma, pressure_sigma;
+    the PVA filter: position only) has noise: a zero sigma would make R singular."""
+    keys = (('position_sigma', 1e-9),) + ((('pressure_sigma', 1.0),)
+                                          if p[E + 'filter'] == 'model' else ())
+    for key, least in keys:
         v = p['plant.sensors.' + key]
         if v < least:
             raise ParamError(f'plant.sensors.{key} = {v!r}: the estimator takes its R from it; '

@@ -17,13 +17,13 @@ import os
 import yaml
 
 from ..config.cli import UsageError
-from ..estimator.params import STAGES as ESTIMATOR_STAGES
+from ..estimator.params import DEFAULT_STAGES, STAGES as ESTIMATOR_STAGES
 from ..io.report import write_json
 
-# stage -> the estimator.* override that switches it off: estimator.stages without it (every
-# stage of the chambers structure, core.estimator.params.STAGES; leak_state is eq4_35's)
-STAGES = {stage: {'estimator.stages': [s for s in ESTIMATOR_STAGES if s != stage]}
-          for stage in ESTIMATOR_STAGES if stage != 'leak_state'}
+# stage -> the estimator.* override that switches it off: estimator.stages without it (each
+# default stage of the default chambers structure, core.estimator.params.STAGES)
+STAGES = {stage: {'estimator.stages': [s for s in DEFAULT_STAGES if s != stage]}
+          for stage in DEFAULT_STAGES if ESTIMATOR_STAGES[stage].structure in (None, 'chambers')}
 BASE = 'all_on'
 # the issue's scenarios: what the estimator is for (tracking, load, stiffness) and its faults
 SCENARIOS = ('step', 'load_step', 'sine', 'stiffness', 'sensor_fault', 'sensor_stuck',
@@ -64,7 +64,9 @@ def knob_variants(texts: list) -> dict:
 
 
 def _number(v):
-    """A YAML 1.1 string that is a number (1e-5) as that number; anything else as it is."""
+    """A YAML 1.1 string that is a number (1e-5) as that number; anything else as it is. (A
+    params file or -p stays strict, with a hint, as rcl reads it: core.config.params; --vary
+    is read by this tool alone, which writes the number into its scenario files.)"""
     if isinstance(v, str):
         for kind in (int, float):
             try:
@@ -100,13 +102,11 @@ def scenario_files(scenarios: list, stage: str, folder: str,
     return paths
 
 
-def check_overrides(variants) -> None:
-    """Every variant's overrides load (names, types, cross-key checks) before any run starts;
-    ``variants``: {name: overrides}, or stage names."""
+def check_overrides(variants: dict) -> None:
+    """Every variant's overrides ({name: overrides}) load (names, types, cross-key checks)
+    before any run starts."""
     from ..config.params import ParamError
     from .batch import nominal_params
-    if not isinstance(variants, dict):
-        variants = {s: STAGES[s] for s in variants}
     for name, over in variants.items():
         try:
             nominal_params(overrides={f'estimator:{k}': v for k, v in over.items()})
@@ -114,14 +114,12 @@ def check_overrides(variants) -> None:
             raise UsageError(f'{name}: {err}') from None
 
 
-def run(variants, scenarios: list, family: str, seeds: list, out: str, client,
+def run(variants: dict, scenarios: list, family: str, seeds: list, out: str, client,
         log=print, progress: bool = True) -> dict:
-    """'all_on' and each variant ({name: overrides}, or stage names: each stage off): a
-    campaign set each under ``out``/<name>/ (kept and resumed like a set); returns the table
-    (also ``out``/ablation.json, .md)."""
+    """'all_on' and each variant ({name: overrides}; a stage off: STAGES[stage]): a campaign
+    set each under ``out``/<name>/ (kept and resumed like a set); returns the table (also
+    ``out``/ablation.json, .md)."""
     from .campaign_set import run_set
-    if not isinstance(variants, dict):
-        variants = {s: STAGES[s] for s in variants}
     check_overrides(variants)
     summaries = {}
     for stage, over in [(BASE, {})] + list(variants.items()):
