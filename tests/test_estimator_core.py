@@ -383,7 +383,7 @@ def test_estimator_schema_registered_and_defaults_match_yaml(params):
 
 @pytest.mark.parametrize('key,value,needle', [
     ('estimator.filter', 'ekf', 'one of model|pva'),
-    ('estimator.model.F_s', -1.0, 'estimator.model.F_s'),
+    ('estimator.model.v_eps', -1.0, 'estimator.model.v_eps'),
     ('estimator.node.stale_time', 'fast', 'estimator.node.stale_time'),
     ('estimator.model.q', [1e-16], 'estimator.model.q'),
 ])

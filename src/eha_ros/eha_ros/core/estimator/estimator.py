@@ -82,7 +82,7 @@ def build_filter(p: dict):
                     round(p[m + 'rest_time'] / pp.Ts), p[m + 'q_load_rest'])
         kf = ChamberKF(circuit(pp), pp.Ts, q, p[e + 'model.p0'], R_pos,
                        p[s + 'pressure_sigma'] ** 2 if with_p else None, gm,
-                       F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
+                       F_s=pp.F_s, v_eps=p[e + 'model.v_eps'],
                        q_load=p[e + 'model.q_load'] if on(p, 'load_state') else None,
                        p0_load=p[e + 'model.p0_load'], leakage=lam, displacement=dlt,
                        compliance=kap, adapt_gate=p[m + 'adapt_gate'],
@@ -96,7 +96,7 @@ def build_filter(p: dict):
     h = hydromech(pp, p[e + 'model.pd_leakage'])
     R_pd = 2.0 * p[s + 'pressure_sigma'] ** 2 if with_p else None
     kf = ModelKF(h, pp.Ts, p[e + 'model.q'], p[e + 'model.p0'], R_pos, R_pd, gm,
-                 F_s=p[e + 'model.F_s'], v_eps=p[e + 'model.v_eps'],
+                 F_s=pp.F_s, v_eps=p[e + 'model.v_eps'],
                  q_leak=p[e + 'model.q_leak'] if on(p, 'leak_state') else None,
                  p0_leak=p[e + 'model.p0_leak'],
                  q_load=p[e + 'model.q_load'] if on(p, 'load_state') else None,

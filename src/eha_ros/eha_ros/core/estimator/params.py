@@ -95,8 +95,9 @@ STAGES = {
                                '3.33 (plant.friction F_c, F_s, v_s; Table 3.7) at the '
                                'pump-flow velocity, low-passed at friction_lowpass '
                                '(adapt.friction_input); without it (and in the eq4_35 '
-                               'structure) eq. 4.36: -sign(xdot) min(|p_D A_p|, F_s) with F_s, '
-                               'v_eps', 'chambers'),
+                               'structure) eq. 4.36: -sign(xdot) min(|p_D A_p|, F_s) with '
+                               'the plant\'s static friction plant.friction.F_s (thesis: '
+                               '800 N, Table 3.7) and v_eps', 'chambers'),
     'noise_level': Stage("measure the position and pressure sensors' noise level online and "
                          "scale R (and the Gauss-Markov state's q) by it (second differences "
                          "of its readings; core.estimator.noise_level, issue 15)", 'chambers'),
@@ -155,8 +156,6 @@ ESTIMATOR = Schema('estimator', [
               'while the piston is at rest (stiction: the holding force is whatever holds it; '
               'the friction input is held). Campaigns over the family tried 1e2, 1e3, 3e3, '
               '1e4: above 1e3 a 1 mm sensor bias at rest is no longer told from motion'),
-    Param(E + 'model.F_s', 'float', 'N', 800.0, 0.0, 1.0e5,
-          doc='friction bound of eq. 4.36 (thesis: 800 N; without stribeck_friction only)'),
     Param(E + 'model.v_eps', 'float', 'm/s', 1.0e-2, 1.0e-6, 0.1,
           doc='pump-flow velocity D_p w/A_p over which eq. 4.36 friction reaches full sign '
               '(choice)'),
