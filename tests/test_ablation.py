@@ -93,11 +93,12 @@ def test_ablation_runs_end_to_end(tmp_path):
 
 def test_knob_variants_name_each_value_and_reach_the_runs(tmp_path):
     v = A.knob_variants(['model.flow_share=0.5,2', 'estimator.fault.drift_h=150',
-                         'model.q_flow=1e-9'])
+                         'model.q_flow=1e-9', 'model.q=[1e-16, 1e-11, 1e6]'])
     assert v == {'model.flow_share=0.5': {'estimator.model.flow_share': 0.5},
                  'model.flow_share=2': {'estimator.model.flow_share': 2},
                  'fault.drift_h=150': {'estimator.fault.drift_h': 150},
-                 'model.q_flow=1e-9': {'estimator.model.q_flow': 1e-9}}
+                 'model.q_flow=1e-9': {'estimator.model.q_flow': 1e-9},
+                 'model.q=[1e-16, 1e-11, 1e6]': {'estimator.model.q': [1e-16, 1e-11, 1e6]}}
     A.check_overrides(v)
     path = A.scenario_files(['step'], 'model.flow_share=0.5', str(tmp_path),
                             v['model.flow_share=0.5'])[0]

@@ -59,14 +59,18 @@ def knob_variants(texts: list) -> dict:
         except yaml.YAMLError:
             raise UsageError(f'--vary {text!r}: the values are not a YAML list') from None
         for v in vals:
-            out[f'{full[len("estimator."):]}={v}'] = {full: _number(v)}
+            label = f'[{", ".join(map(str, v))}]' if isinstance(v, list) else v
+            out[f'{full[len("estimator."):]}={label}'] = {full: _number(v)}
     return out
 
 
 def _number(v):
-    """A YAML 1.1 string that is a number (1e-5) as that number; anything else as it is. (A
-    params file or -p stays strict, with a hint, as rcl reads it: core.config.params; --vary
-    is read by this tool alone, which writes the number into its scenario files.)"""
+    """A YAML 1.1 string that is a number (1e-5) as that number, also in a list; anything
+    else as it is. (A params file or -p stays strict, with a hint, as rcl reads it:
+    core.config.params; --vary is read by this tool alone, which writes the number into its
+    scenario files.)"""
+    if isinstance(v, list):
+        return [_number(x) for x in v]
     if isinstance(v, str):
         for kind in (int, float):
             try:
