@@ -23,10 +23,10 @@ from . import adapt
 from . import fault_detector as fd
 from . import kernels
 from . import noise_level
+from . import sensor_band
 from . import stepper
 from .chamber_kf import ChamberKF
 from .model_kf import ModelKF
-from . import sensor_band
 from .params import drift_q, on
 from .pva import PvaKF
 

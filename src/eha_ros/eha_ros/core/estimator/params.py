@@ -189,9 +189,9 @@ ESTIMATOR = Schema('estimator', [
           doc='initial variance of the external force (1e8: 10 kN sigma)'),
     # adaptive model states and projection (chambers structure; core.estimator.adapt, issue 15):
     # relative corrections of the uncertain flow parameters of Table 4.5 as random-walk states,
-    # projected onto their ranges. Defaults: TUNED (p0, q, ranges DERIVED by
-    # tools/tune_estimator from the Table 4.5 family + box and the sensor model,
-    # core.estimator.tuning).
+    # projected onto their ranges. Defaults: TUNED (p0 and ranges DERIVED by
+    # tools/tune_estimator from the Table 4.5 family + box, core.estimator.tuning); the drifting
+    # ones random-walk by drift_q.
     *_adaptive('leakage', 'lambda', 1e6, -1.0, 1e3),
     *_adaptive('external_leakage', 'epsilon', 1e6, -1.0, 1e3),
     *_adaptive('displacement', 'delta', 1.0, -0.9, 1.0),
@@ -238,7 +238,8 @@ ESTIMATOR = Schema('estimator', [
               '(an unknown load step) must not be taken for a parameter change'),
     Param(E + 'model.q_x_disagree', 'float', 'm^2', 1e-8, 0.0, 1.0,
           doc='per-step position process noise while filter and sensor disagree beyond the '
-              'DISAGREE band (core.estimator.sensor_band): the estimate is pulled back to the measurement'),
+              'DISAGREE band (core.estimator.sensor_band): the estimate is pulled back to the '
+              'measurement'),
     # consistency monitor (core.estimator.adapt.monitor), verdict: ok | model_mismatch |
     # sensor_fault | filter_sensor_disagree
     Param(E + 'monitor.lowpass', 'float', 'Hz', 5.0, 0.01, 500.0,
