@@ -10,7 +10,7 @@ from eha_ros.core.estimator.params import SCHEMA
 
 # constants that are not one parameter's value, and what they are computed from
 DERIVED = {
-    'x_max': 'plant stroke / 2 + validity.position_margin',
+    'x_max': 'plant stroke / 2 + estimator.POSITION_MARGIN',
     'use_pressure': 'measurements == position_pressure, for a model filter',
     'model_filter': 'filter', 'chambers': 'model.structure', 'n_lin': 'the filter',
     'alpha_pressure': 'adapt.PRESSURE_LOWPASS', 'alpha_friction': 'model.friction_lowpass',

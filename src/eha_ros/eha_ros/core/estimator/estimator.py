@@ -33,6 +33,9 @@ from .pva import PvaKF
 # a motor-speed reading beyond this times the drive's speed reference limit
 # (plant.drive.omega_max, 8000 rpm) is not physical: rejected, the last good one held
 MOTOR_SPEED_MARGIN = 1.5
+# a position reading beyond +-(stroke/2 + this) is not physical: rejected, predict only (a
+# knob until issue 44's screen: 2.5 and 10 mm changed no campaign figure, random:50)
+POSITION_MARGIN = 5.0e-3    # [m]
 
 
 @dataclass
@@ -119,7 +122,7 @@ class Estimator:
         self.chambers = isinstance(self.kf, ChamberKF)
         self.is_model = self.chambers or isinstance(self.kf, ModelKF)
         self.use_pressure = self.is_model and self.kf.with_pressure
-        self.x_max = 0.5 * pp.stroke + params[e + 'validity.position_margin']
+        self.x_max = 0.5 * pp.stroke + POSITION_MARGIN
         self.pressure_min = params[e + 'validity.pressure_min']
         self.pressure_max = params[e + 'validity.pressure_max']
         self.max_abs_motor_speed = MOTOR_SPEED_MARGIN * params['plant.drive.omega_max']

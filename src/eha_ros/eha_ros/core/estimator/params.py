@@ -261,8 +261,6 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'pva.p0', 'float[]', 'm^2, (m/s)^2, (m/s^2)^2', [1e-6, 1e-2, 1e2], 0.0, 1e20,
           min_len=3, doc='initial variances, eq. 4.34 (which prints 100, 10, 100)'),
     # measurement validity
-    Param(E + 'validity.position_margin', 'float', 'm', 5.0e-3, 0.0, 0.1,
-          doc='accepted position: within +-(stroke/2 + margin)'),
     Param(E + 'validity.pressure_min', 'float', 'Pa', 0.0, -1e6, 1e7,
           doc='pressure sensor range, gauge: lowest accepted reading (0 bar)'),
     Param(E + 'validity.pressure_max', 'float', 'Pa', 400.0 * BAR, 1e5, 1e9,
