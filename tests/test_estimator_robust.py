@@ -401,6 +401,10 @@ def test_sensor_bands_follow_the_sensor_model(params):
     assert (b.offset_bound, b.band, b.jump_step) == pytest.approx((2.532e-4, 2.1362e-4,
                                                                     1.4142e-4), rel=2e-4)
     assert SB.NOISE_SCALE == load_box()['noise'][1]
+    from eha_ros.core.qft.spec import load_spec
+    spec = load_spec(os.path.join(ROOT, 'config', 'qft_spec.yaml'))
+    assert SB.N_PLANTS == np.prod([spec[f'family.{n}_n'] for n in ('C_eq', 'D_p', 'beta', 'k_T',
+                                                                   'k_E')])
     s = 'plant.sensors.'
     loud = SB.from_params({**params, s + 'position_sigma': 2 * params[s + 'position_sigma'],
                            s + 'position_gm_sigma': 2 * params[s + 'position_gm_sigma']})
