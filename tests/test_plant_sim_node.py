@@ -295,12 +295,16 @@ def test_truth_carries_the_offset_inside_the_measured_position(ros_node):
 
 
 def test_lockstep_start_waits_for_named_subscribers(ros_node):
-    """sim_node.start_after (what run_stack --record sets for the recorder): tick 0
-    is held until the named node subscribes to every /eha topic with a publisher."""
+    """sim_node.start_after (what run_stack --record sets for the recorder): tick 0 is held
+    until the named node subscribes to every /eha topic with a publisher and reports, on its
+    latched ~/matched, that DDS has matched each of their publishers to it."""
+    import json
     from eha_msgs.msg import ActuatorCommand, PlantTruth
     from eha_ros.nodes.common import latched_qos
     from lifecycle_msgs.msg import State
+    from std_msgs.msg import String
     me = ros_node.get_name()
+    report = ros_node.create_publisher(String, f'/lg/{me}/matched', latched_qos())
     proc, states = held_plant(ros_node, '/lg', '-p', f'sim_node.start_after:=[{me}]')
     try:
         time.sleep(1.5)          # we do not subscribe to eha/sim/truth or eha/command yet: held
@@ -310,10 +314,19 @@ def test_lockstep_start_waits_for_named_subscribers(ros_node):
         time.sleep(1.0)          # nor to eha/plant_state: still held
         assert max(s.seq for s in states) == 0
         ros_node.create_subscription(State, '/lg/eha/plant_state', lambda m: None, latched_qos())
+        time.sleep(1.0)          # subscribed to all, but no report of what DDS matched: held
+        assert max(s.seq for s in states) == 0
+        topics = ['/lg/eha/state', '/lg/eha/sim/truth', '/lg/eha/command',
+                  '/lg/eha/plant_state']
+        report.publish(String(data=json.dumps({t: 1 for t in topics[:-1]})))
+        time.sleep(1.0)          # eha/plant_state not reported matched: held
+        assert max(s.seq for s in states) == 0
+        report.publish(String(data=json.dumps({t: 1 for t in topics})))
         assert wait_for(lambda: states[-1].seq == 1, 20), 'tick 0 still held'
     finally:
         _, _, err = stop_process(proc)
-    assert f'start gate: {me} subscribed to every /lg/eha/* topic; stepping' in err, err
+    assert f'start gate: {me} subscribed to every /lg/eha/* topic, its publishers matched; ' \
+        'going on' in err, err
 
 
 def test_lockstep_start_gives_up_after_its_timeout(ros_node):
@@ -324,7 +337,7 @@ def test_lockstep_start_gives_up_after_its_timeout(ros_node):
     finally:
         _, _, err = stop_process(proc)
     assert 'start gate: still missing after 1 s: nobody on /lt/eha/' in err, err
-    assert 'stepping anyway' in err
+    assert 'going on anyway' in err
 
 
 def test_bad_params_file_stops_node_with_one_line(tmp_path):

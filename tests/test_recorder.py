@@ -111,7 +111,6 @@ def test_unwritable_output_is_one_line(tmp_path):
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 COMPARED = ['/eha/state', '/eha/sim/truth', '/eha/estimate', '/eha/command']
-PLANT_OWN = ['/eha/state', '/eha/sim/truth']  # the plant's own streams: the gate waits for them
 # tick-locked reference steps (tick, position m); the plant starts once the script reaches the
 # controller (run_recorded), the first 1500 ticks let the loop settle
 STEPS = [(1500, 0.002), (2200, -0.001)]
@@ -222,19 +221,17 @@ def test_lockstep_runs_with_same_seed_record_identically(ros_node, tmp_path):
             seqs = sorted(run[topic])
             missing = (seqs[-1] - seqs[0] + 1) - len(seqs)
             # lock-step does not wait for the recorder: a recorder starved of CPU for longer
-            # than the writers' 100-sample history loses the samples DDS could not repair in
-            # time (seen once on the loaded CI machine: 6 of 2936). Reported, bounded here.
+            # than the writers' history (core.topics.STREAM, 1000 samples) would lose what DDS
+            # could not repair in time (with 100: 6 of 2936 once on the loaded CI machine)
             if missing:
                 print(f'{topic}: {missing} samples missing in {seqs[0]}..{seqs[-1]}')
             assert missing <= 0.01 * len(seqs), f'{topic}: {missing} seq gaps'
-            if topic in PLANT_OWN:           # the start gate: from the first ticks
-                assert seqs[0] < 50, f'{topic}: recording starts at tick {seqs[0]}'
+            # the start gate waits until the recorder has matched every publisher (its
+            # /recorder/matched report): each stream from the first ticks (estimate and command
+            # once started at tick 304 and 1421 when the gate only looked at the graph)
+            assert seqs[0] < 50, f'{topic}: recording starts at tick {seqs[0]}'
         common = sorted(set(pa[topic]) & set(pb[topic]))
-        # estimate and command start when DDS has matched their publishers to the recorder,
-        # which nothing gates (docs/nodes/recorder.md): seen on the loaded CI machine from tick 304, and once
-        # from 1421 of 3100; 1000 common ticks still hold the second reference step
-        assert len(common) >= (ticks - 50 if topic in PLANT_OWN else 1000), \
-            (topic, len(common), common[:1])
+        assert len(common) >= ticks - 50, (topic, len(common), common[:1])
         repeats = [k for k in common if len(pa[topic][k]) > 1 or len(pb[topic][k]) > 1]
         assert not repeats, f'{topic}: one seq with different payloads, e.g. {repeats[:5]}'
         diff = [k for k in common if pa[topic][k] != pb[topic][k]]

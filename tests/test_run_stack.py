@@ -144,31 +144,34 @@ def test_live_node_takes_its_parameters_with_live():
 MACHINE_STOP = 'loop supervisor: unanswered: the loop cannot hold real time'
 
 
-def bridge_attempts():
-    """Two tries of a --plant bridge run: on 2 cores ads_peer and eha_loop take about 1.1 of
-    them beside the tests, and CI has seen the supervisor stop a bridge run in its first
-    seconds (MACHINE_STOP, exit 1: the stack's stated reaction). A second such stop fails."""
-    for attempt in (1, 2):
-        yield attempt, attempt == 2
-
-
-def test_plant_swapped_for_the_bridge_and_the_ads_test_peer(tmp_path):
+@pytest.mark.parametrize('mode, procs', [
+    ('lockstep', {'ads_peer', 'hardware_bridge', 'estimator', 'controller', 'switch_manager'}),
+    ('realtime', {'ads_peer', 'eha_loop'})])
+def test_plant_swapped_for_the_bridge_and_the_ads_test_peer(tmp_path, mode, procs):
     """--plant bridge changes only the plant side: ads_peer (the simulated PLC) + the bridge in
-    place of plant_sim; --activate: run_stack activates (arms) it after the controller."""
-    for attempt, last in bridge_attempts():
-        out = tmp_path / f'attempt{attempt}'
-        out.mkdir()
-        r, folder, summary = run_stack(out, '--plant', 'bridge', '--activate', '--duration', '6')
-        if r.returncode == 0 or last or not (summary or {}).get('stop_reason', '').startswith(
-                MACHINE_STOP):
-            break
-        print(f'attempt {attempt}: {summary["stop_reason"]}; once more')
-    assert r.returncode == 0, r.stdout[-1500:] + r.stderr[-1500:]
-    assert set(summary['exit_codes']) == {'ads_peer', 'eha_loop'}
-    assert '--plant bridge' in summary['processes']['eha_loop']
+    place of plant_sim; --activate: run_stack activates (arms) it after the controller.
+    Lock-step runs to its end whatever the machine. In real time, whether 2 loaded cores hold
+    1 kHz for ads_peer and eha_loop beside the tests is the machine's business (CI has seen
+    12 % of the ticks unanswered in the first second, twice in a row): the loop supervisor's
+    stop (MACHINE_STOP, exit 1, the stack's stated reaction) is accepted there, the swap is
+    asserted either way."""
+    r, folder, summary = run_stack(tmp_path, '--plant', 'bridge', '--activate', '--mode', mode,
+                                   '--duration', '6')
+    machine = mode == 'realtime' and summary is not None and \
+        summary['stop_reason'].startswith(MACHINE_STOP)
+    if machine:
+        print(f'real time not held on this machine: {summary["stop_reason"]}')
+        assert r.returncode == 1 and 'run_stack: FAILED: stopped (loop supervisor' in r.stdout
+    else:
+        assert r.returncode == 0, r.stdout[-1500:] + r.stderr[-1500:]
+        assert summary['stop_reason'] == 'duration'
+    assert set(summary['exit_codes']) == procs and set(summary['exit_codes'].values()) == {0}
+    if mode == 'realtime':
+        assert '--plant bridge' in summary['processes']['eha_loop']
     link = summary['diagnostics']['hardware_bridge: loop']
     assert LOOP_KEYS <= set(link) and link['backend'] == 'ads'    # plant_sim's keys, and the PLC's
-    assert link['active'] is True and link['state'] == 'active' and link['link_up'] is True and link['ticks'] > 100, link
+    assert link['active'] is True and link['state'] == 'active' and link['link_up'] is True \
+        and link['ticks'] > 100, link
     assert 'plant_sim: loop' not in summary['diagnostics']
     for node in ('estimator', 'controller', 'switch_manager'):
         assert any(k.startswith(node) for k in summary['diagnostics']), node
@@ -369,35 +372,28 @@ def test_full_disk_is_reported_at_once_and_stack_json_written(tmp_path):
 def test_bridge_link_loss_fails_the_run(tmp_path):
     """Issue 21 item 11: the ADS link lost (the test PLC stopped) fails the run, where
     run_stack used to end with 'lost 0' and rc 0: the loop supervisor sees the plant side
-    stall within 0.2 s (ERROR, safe state, the run stops, exit 1); the bridge's own link
-    ERROR follows when its link-loss count is reached before the stop."""
+    stall (ERROR, safe state, the run stops, exit 1); the bridge's own link ERROR follows when
+    its link-loss count is reached before the stop. In lock-step (stall after
+    switch.supervisor.lockstep_stall_timeout, 5 s): a real-time run can be stopped by a loaded
+    machine before the link is lost (MACHINE_STOP, seen on CI), lock-step cannot."""
     import time
-    for attempt, last in bridge_attempts():
-        st = Started(tmp_path, f'link{attempt}', '--plant', 'bridge', '--activate',
-                     '--duration', '60')
-        peer, stopped = None, False
-        try:
-            assert st.running(), ''.join(st.lines)[-4000:]
-            assert wait_for(lambda: _child(st, 'ads_peer'), 10), ''.join(st.lines)[-4000:]
-            peer = _child(st, 'ads_peer')
-            time.sleep(2.0)
-            try:
-                if st.proc.poll() is None:
-                    os.kill(peer, signal.SIGSTOP)
-                    stopped = True
-            except ProcessLookupError:       # the run ended meanwhile (below)
-                pass
-            assert st.proc.wait(timeout=90) == 1, ''.join(st.lines)[-4000:]
-        finally:
-            if peer and _alive(peer):
-                os.kill(peer, signal.SIGCONT)
-            if st.proc.poll() is None:
-                st.proc.kill()
-        text = ''.join(st.lines)
-        if stopped or last or f'stopped ({MACHINE_STOP}' not in text:
-            break
-        print(f'attempt {attempt}: stopped by the machine before the link loss; once more')
-    print(f'peer stopped by the test: {stopped}')
+    st = Started(tmp_path, 'link', '--plant', 'bridge', '--activate', '--mode', 'lockstep',
+                 '--duration', '120')
+    peer = None
+    try:
+        assert st.running(), ''.join(st.lines)[-4000:]
+        assert wait_for(lambda: _child(st, 'ads_peer'), 10), ''.join(st.lines)[-4000:]
+        peer = _child(st, 'ads_peer')
+        time.sleep(2.0)
+        assert st.proc.poll() is None, ''.join(st.lines)[-4000:]
+        os.kill(peer, signal.SIGSTOP)
+        assert st.proc.wait(timeout=90) == 1, ''.join(st.lines)[-4000:]
+    finally:
+        if peer and _alive(peer):
+            os.kill(peer, signal.SIGCONT)
+        if st.proc.poll() is None:
+            st.proc.kill()
+    text = ''.join(st.lines)
     assert 'run_stack: FAILED: stopped (loop supervisor: stalled: plant side stalled' in text, \
         text[-4000:]
     assert 'switch_manager: supervisor' in st.summary()['errors']

@@ -127,6 +127,8 @@ class Stack:
                     ['-p', 'use_sim_time:=true']
             if pre and record:  # the plant side holds tick 0 until the recorder has subscribed
                 args += ['-p', f'{name}:{pre}.start_after:=[recorder]']
+            if name == 'experiment' and record:          # and the plan its start
+                args += ['-p', 'experiment:experiment.start_after:=[recorder]']
         if record:
             self.extra.setdefault('recorder', [])
             self.extra['recorder'] += ['-p', f'recorder:recorder.output:={record}']

@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import gc
+import json
 import re
 import signal
 import sys
@@ -251,15 +252,41 @@ def publish_counted(node, pub, msg, what: str) -> None:
         node.get_logger().error(f'publishing {what} failed: {err}', throttle_duration_sec=1.0)
 
 
+class MatchReport:
+    """What DDS has matched to a node's subscriptions, for :class:`StartGate`: latched JSON
+    {topic: publishers matched} on ``~/matched``, published when it changes (the recorder)."""
+    TOPIC = 'matched'
+
+    def __init__(self, node):
+        from std_msgs.msg import String
+        self.msg = String
+        self.pub = node.create_publisher(String, f'~/{self.TOPIC}', latched_qos())
+        self.last = None
+
+    def update(self, matched: dict):
+        if matched != self.last:
+            self.last = dict(matched)
+            self.pub.publish(self.msg(data=json.dumps(matched, sort_keys=True)))
+
+    @staticmethod
+    def parse(text: str) -> dict:
+        """{topic: count}; anything else (not ours) counts as nothing matched."""
+        try:
+            got = json.loads(text)
+            return {str(k): int(v) for k, v in got.items()} if isinstance(got, dict) else {}
+        except (ValueError, TypeError, AttributeError):
+            return {}
+
+
 class StartGate:
-    """Start gate of the plant side (lock-step and real time): tick 0 is held until every node
-    named in ``names`` subscribes to every topic under ``prefix`` that has a publisher (a
-    recorder) and each of the node's ``own``
-    publishers has matched every subscription the graph shows on its topic (so a recording
-    has the plant's own streams from the first ticks), seen for ``settle`` s in a row, or until
-    ``timeout`` s of wall time after start-up (then a warning names what was missing). Other
-    nodes' publishers can still be matching the recorder when the graph shows its
-    subscription: their streams may start later in the recording."""
+    """Start gate (the plant side's tick 0, an experiment's plan): held until every node named
+    in ``names`` subscribes to every topic under ``prefix`` that has a publisher and has
+    matched each of those publishers (its report on ``<name>/matched``, :class:`MatchReport`,
+    in the gated node's namespace: the graph shows a subscription before DDS has matched it to
+    every publisher, and the messages in between are lost to a recorder), and each of the
+    node's ``own`` publishers has matched every subscription the graph shows on its topic;
+    seen for ``settle`` s in a row, or until ``timeout`` s of wall time after start-up (then a
+    warning names what was missing)."""
 
     def __init__(self, node, names, prefix: str, timeout: float, own=(), settle: float = 0.25):
         self.node, self.prefix, self.own, self.settle = node, prefix, tuple(own), settle
@@ -268,15 +295,30 @@ class StartGate:
         self.timeout = timeout
         self.open = not self.names
         self.since = None                 # wall time since which nothing was missing
+        self.reports = {name: {} for name in self.names}     # name -> {topic: matched}
+        from std_msgs.msg import String
+        for name in self.names:
+            node.create_subscription(String, f'{name}/{MatchReport.TOPIC}',
+                                     functools.partial(self._report, name), latched_qos())
+
+    def _report(self, name, msg):
+        self.reports[name] = MatchReport.parse(msg.data)
 
     def missing(self) -> list[str]:
         n = self.node
         out = []
         for topic, _ in n.get_topic_names_and_types():
-            if not topic.startswith(self.prefix) or not n.count_publishers(topic):
+            if not topic.startswith(self.prefix):
+                continue
+            publishers = n.count_publishers(topic)
+            if not publishers:
                 continue
             subs = {i.node_name for i in n.get_subscriptions_info_by_topic(topic)}
-            out += [f'{name} on {topic}' for name in self.names if name not in subs]
+            out += [f'{name} on {topic}' if name not in subs else
+                    f'{name} matching {topic} ({matched} of {publishers} publishers)'
+                    for name in self.names
+                    for matched in [self.reports[name].get(topic, 0)]
+                    if name not in subs or matched < publishers]
         out += [f'matching on {p.topic_name}' for p in self.own
                 if p.get_subscription_count() < n.count_subscribers(p.topic_name)]
         return out
@@ -291,10 +333,11 @@ class StartGate:
         if self.since is not None and now - self.since >= self.settle:
             self.open = True
             self.node.get_logger().info(f'start gate: {", ".join(self.names)} subscribed '
-                                        f'to every {self.prefix}* topic; stepping')
+                                        f'to every {self.prefix}* topic, its publishers '
+                                        'matched; going on')
         elif now > self.deadline:
             self.open = True
             self.node.get_logger().warning(
                 f'start gate: still missing after {self.timeout:g} s: '
-                f'{", ".join(missing[:6])}; stepping anyway')
+                f'{", ".join(missing[:6])}; going on anyway')
         return self.open

@@ -34,11 +34,12 @@ from ..core.ident.params import SCHEMA
 from ..core.ident.run import ExperimentRun
 from ..core.stats import LoopStats
 from . import diag
-from .common import (PLANT_STATE_TOPIC, declare_and_validate, factory,
+from .common import (PLANT_STATE_TOPIC, StartGate, declare_and_validate, factory,
                      publish_counted, qos_of, run)
 from ..core import topics as T
 
 TOPIC = T.EXPERIMENT.name
+START_TIMEOUT = 30.0        # [s] experiment.start_after: start anyway (warned) after this
 
 
 class Experiment:
@@ -84,6 +85,10 @@ class Experiment:
                                  qos_of(T.ESTIMATE))
         self.create_subscription(RedundancyStatus, T.REDUNDANCY.name, self.on_redundancy,
                                  qos_of(T.REDUNDANCY))
+        own = [x for x in (self.pub_info, self.pub_cmd, self.pub_ref, self.pub_load) if x]
+        self.gate = StartGate(self, p['experiment.start_after'],
+                              self.resolve_topic_name(T.STATE.name).rsplit('/', 1)[0] + '/',
+                              START_TIMEOUT, own=own)
         self.create_timer(p['experiment.diagnostics_period'], self.publish_diagnostics)
         self.get_logger().info(f'experiment {plan.kind}: {plan.summary}; '
                                f'{plan.duration_s:.1f} s planned')
@@ -129,8 +134,9 @@ class Experiment:
 
     def ready(self, k: int) -> bool:
         """The loop runs (a controller answers, unless we are the one) with the plant side
-        active, for experiment.start_delay."""
-        if not self.plant_active or not (self.drive or self.commands_seen):
+        active, for experiment.start_delay, and the recorder has matched every stream."""
+        if not self.plant_active or not (self.drive or self.commands_seen) or \
+                not self.gate.poll():
             self.ready_since = None
             return False
         now = time.monotonic()

@@ -16,7 +16,7 @@ import time
 from ..core.io.mcap_sink import McapSink
 from ..core.io.recorder_params import SCHEMA
 from . import diag
-from .common import declare_and_validate, factory, run
+from .common import MatchReport, declare_and_validate, factory, run
 from .tap import TopicTap, qos_yaml
 
 
@@ -46,10 +46,15 @@ class Recorder:
                           clock=wall)
         self.tap = TopicTap(self, p['recorder.namespace'], extra, p['recorder.depth'],
                             self.open_topic, 'recording')
-        self.create_timer(p['recorder.discovery_period'], self.tap.discover, clock=wall)
+        self.matched = MatchReport(self)     # what the plant side's start gate waits for
+        self.create_timer(p['recorder.discovery_period'], self.discover, clock=wall)
         self.get_logger().info(f'recorder: {self.tap.ns}/*{" + " if extra else ""}'
                                f'{", ".join(sorted(extra))} -> {self.output}')
+        self.discover()
+
+    def discover(self):
         self.tap.discover()
+        self.matched.update(self.tap.matched())
 
     def open_topic(self, topic, type_name, definition, stamped, ends, offered):
         meta = {'offered_qos_profiles': qos_yaml(ends) if offered else ''}

@@ -120,6 +120,11 @@ class TopicTap:
                     f'{qos.durability.name.lower()}) does not match: not {self.verb}')
                 return
 
+    def matched(self) -> dict:
+        """{topic: publishers DDS has matched to our subscription} (the graph can show a
+        publisher before it is matched; its messages until then are not seen)."""
+        return {topic: sub.get_publisher_count() for topic, (sub, _, _) in self.subs.items()}
+
     def drain(self) -> int:
         """Hand what DDS still holds to the callbacks (the executor has stopped spinning)."""
         n = 0

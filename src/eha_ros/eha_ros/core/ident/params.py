@@ -21,6 +21,11 @@ NODE = Schema('experiment', [
           doc='references and loads are sent this many ticks ahead, stamped with their tick'),
     Param(E + 'start_delay', 'float', 's', 1.0, 0.0, 600.0,
           doc='wait this long after the loop runs (plant side active) before the plan starts'),
+    Param(E + 'start_after', 'str[]', '', [''], min_len=1,
+          doc='the plan also waits until these nodes subscribe to every /eha topic with a '
+              'publisher and report each publisher matched (their ~/matched; run_stack '
+              '--record adds the recorder; after 30 s it starts anyway, with a warning); '
+              'empty string = none'),
     Param(E + 'abort_error', 'float', 'm', 0.005, 1e-5, 0.12,
           doc='closed loop: stop when |reference - estimate| stays above this'),
     Param(E + 'abort_ticks', 'int', '', 20, 1, 100000, doc='... for this many ticks in a row'),
