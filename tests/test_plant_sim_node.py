@@ -107,7 +107,10 @@ def probe(plant_proc, ros_node):
 
 
 def test_state_stream_at_1khz(probe):
-    """The plant publishes at 1 kHz (its own stamps) and a subscriber loses no state."""
+    """The plant publishes at 1 kHz (its own stamps) and a subscriber loses no state. The
+    median stamp step per tick is the period; the overall rate only has an upper bound: a VM
+    that stalls the loop thread for more than MAX_CATCH_UP periods makes the plant skip those
+    deadlines (counted, docs/nodes/plant_side.md), which lowers it."""
     probe.states.clear(); probe.arrivals.clear()
     probe.wait_ticks(3000)
     st = probe.states
@@ -115,10 +118,12 @@ def test_state_stream_at_1khz(probe):
     stamps = np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in st])
     rate = (seqs[-1] - seqs[0]) / (stamps[-1] - stamps[0])
     received = len(seqs) / (seqs[-1] - seqs[0] + 1)
+    step = np.median(np.diff(stamps) / np.diff(seqs))
     period = np.diff(stamps)
-    print(f'publish rate {rate:.1f} Hz, received {100 * received:.2f} %, stamp period p99 '
-          f'{1e3 * np.percentile(period, 99):.2f} ms over {len(seqs)} states')
-    assert 980 <= rate <= 1020
+    print(f'publish rate {rate:.1f} Hz, median period {1e3 * step:.4f} ms, received '
+          f'{100 * received:.2f} %, stamp period p99 {1e3 * np.percentile(period, 99):.2f} ms '
+          f'over {len(seqs)} states')
+    assert 0.98e-3 <= step <= 1.02e-3 and rate <= 1020
     assert np.all(np.diff(seqs) >= 1)
     assert received >= 0.99
     assert len(probe.truths) > 0 and all(t.seq > 0 for t in probe.truths[-10:])
