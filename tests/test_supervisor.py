@@ -206,7 +206,16 @@ def test_node_trips_to_the_safe_state(ros_node, tmp_path, fault, kind):
               f'ms: {text}')
         assert text.startswith(kind + ': ')
         limit = {'controller': 0.2, 'rejected': 0.05, 'cycle': 0.5}[fault]
-        assert t_safe - feeder.t_fault < limit + 0.5     # stated time + DDS/scheduling slack
+        if fault == 'controller':          # a stall is wall time, the manager's clock
+            assert t_safe - feeder.t_fault < limit + 0.5     # + DDS/scheduling slack
+        else:                              # counted in ticks: the seq of the trip
+            trip = next(st for st in feeder.diagnostics.all('switch_manager: supervisor')
+                        if st.level == 2)
+            ticks = int(trip.values['seq']) - feeder.fault_at
+            print(f'{fault}: tripped {ticks} ticks after the fault')
+            # the feeder, a Python thread, slows on a loaded machine and the trip with it in wall
+            # time (2.5 s for the limit cycle once, both cores busy); the ticks it takes do not
+            assert 0 <= ticks * TS < limit + 0.05
     finally:
         feeder.stop.set()
         thread.join(timeout=5) if thread.is_alive() else None
