@@ -200,12 +200,27 @@ def test_not_armed_no_speed_reaches_plc(probe, peer):
     assert abs(probe.states[-1].motor_speed[0]) < 5.0
 
 
+PLC_STALL = 0.02     # [s] a gap in the PLC task's cycles longer than this: this process stalled
+
+
 def test_armed_speed_reaches_plc_then_watchdog_zeroes_it(probe, peer):
-    probe.hold(0.0, 0.2)
-    res = probe.arm_fresh()
-    assert res.success, res.message
-    log = speeds_logged(peer, 0.3, lambda: probe.hold(100.0, 1.0))   # then commands stop
-    t_last = probe.last_cmd_time
+    """The PLC task runs in this test process: where the process stalls (CI, once: no PLC cycle
+    from 1 ms to 193 ms after the last command), its log cannot tell when the watchdog acted.
+    Such an attempt is measured again (at most three)."""
+    for attempt in (1, 2, 3):
+        probe.hold(0.0, 0.2)
+        res = probe.arm_fresh()
+        assert res.success, res.message
+        log = speeds_logged(peer, 0.3, lambda: probe.hold(100.0, 1.0))   # then commands stop
+        t_last = probe.last_cmd_time
+        near = log[(log[:, 0] > t_last - 0.1) & (log[:, 0] < t_last + 0.25), 0]
+        stall = np.max(np.diff(near)) if len(near) > 1 else np.inf
+        if stall <= PLC_STALL:
+            break
+        print(f'attempt {attempt}: the PLC task stalled {1e3 * stall:.0f} ms near the last '
+              f'command; measured again')
+        probe.arm(False)
+    assert stall <= PLC_STALL, f'the PLC task stalled in all three attempts ({stall:.3f} s)'
     moving = log[log[:, 0] < t_last]
     assert np.max(moving[:, 1]) == pytest.approx(100.0) and np.all(moving[:, 1] >= 0.0)
     after = log[log[:, 0] > t_last]
