@@ -288,6 +288,8 @@ class StartGate:
     seen for ``settle`` s in a row, or until ``timeout`` s of wall time after start-up (then a
     warning names what was missing)."""
 
+    CHECK_PERIOD = 0.01     # [s] between looks at the graph (the plant side polls every 20 ms)
+
     def __init__(self, node, names, prefix: str, timeout: float, own=(), settle: float = 0.25):
         self.node, self.prefix, self.own, self.settle = node, prefix, tuple(own), settle
         self.names = [n for n in names if n]
@@ -295,6 +297,7 @@ class StartGate:
         self.timeout = timeout
         self.open = not self.names
         self.since = None                 # wall time since which nothing was missing
+        self.next_check = 0.0             # wall time of the next look at the graph
         self.reports = {name: {} for name in self.names}     # name -> {topic: matched}
         from std_msgs.msg import String
         for name in self.names:
@@ -314,21 +317,28 @@ class StartGate:
             if not publishers:
                 continue
             subs = {i.node_name for i in n.get_subscriptions_info_by_topic(topic)}
-            out += [f'{name} on {topic}' if name not in subs else
-                    f'{name} matching {topic} ({matched} of {publishers} publishers)'
-                    for name in self.names
-                    for matched in [self.reports[name].get(topic, 0)]
-                    if name not in subs or matched < publishers]
+            for name in self.names:
+                matched = self.reports[name].get(topic, 0)
+                if name not in subs:
+                    out.append(f'{name} on {topic}')
+                elif matched < publishers:
+                    out.append(f'{name} matching {topic} ({matched} of {publishers} '
+                               'publishers)')
         out += [f'matching on {p.topic_name}' for p in self.own
                 if p.get_subscription_count() < n.count_subscribers(p.topic_name)]
         return out
 
     def poll(self) -> bool:
-        """True once open (call it while the loop is ready to step)."""
+        """True once open (call it while the loop is ready to step). The graph is looked at
+        every CHECK_PERIOD at most: an experiment polls on each state (lock-step: faster than
+        1 kHz), and each look queries every topic of the graph."""
         if self.open:
             return True
-        missing = self.missing()
         now = time.monotonic()
+        if now < self.next_check:
+            return False
+        self.next_check = now + self.CHECK_PERIOD
+        missing = self.missing()
         self.since = None if missing else (self.since or now)
         if self.since is not None and now - self.since >= self.settle:
             self.open = True
