@@ -345,6 +345,58 @@ def test_lockstep_start_gives_up_after_its_timeout(ros_node):
     assert 'going on anyway' in err
 
 
+def test_lockstep_does_not_run_ahead_of_a_recorder(ros_node):
+    """Lock-step with a recorder named in sim_node.start_after (run_stack --record): no tick
+    while its ~/received shows it more than Pace.LAG states or commands behind what the plant
+    published and got (a starved recorder would lose what overflows its 1000-deep queues; seen
+    in CI: 169 commands in a row); a recorder that makes no progress for Pace.STALL s is left
+    behind, with a warning, and the run goes on."""
+    import json
+    from eha_msgs.msg import ActuatorCommand, ActuatorState
+    from eha_ros.nodes.common import Pace
+    from std_msgs.msg import String
+    me = ros_node.get_name()
+    report = ros_node.create_publisher(String, f'/pc/{me}/received', 10)
+    proc, states = held_plant(ros_node, '/pc', '-p', f'sim_node.start_after:=[{me}]',
+                              '-p', 'sim_node.start_timeout:=0.5')
+    pub = ros_node.create_publisher(ActuatorCommand, '/pc/eha/command', 1000)
+    wait_matched(pub)
+    ros_node.create_subscription(       # command(k) for each new state(k)
+        ActuatorState, '/pc/eha/state',
+        lambda m: m.seq > 0 and pub.publish(ActuatorCommand(seq=m.seq, motor_speed_ref=10.0)),
+        1000)
+
+    def received(n):
+        report.publish(String(data=json.dumps({'/pc/eha/state': n, '/pc/eha/command': n})))
+
+    def held_at(timeout=30):
+        """The last seq once it stood for 1 s (answered at once: only the pace holds it)."""
+        last, since, end = -1, time.monotonic(), time.monotonic() + timeout
+        while time.monotonic() < end:
+            seq = states[-1].seq
+            if seq != last:
+                last, since = seq, time.monotonic()
+            elif time.monotonic() - since > 1.0:
+                return seq
+            time.sleep(0.05)
+        return None
+
+    try:
+        received(1)
+        first = held_at()
+        assert first is not None and Pace.LAG - 10 <= first <= Pace.LAG + 2, first
+        received(first)                  # caught up: another LAG ticks
+        second = held_at()
+        assert second is not None and first + Pace.LAG - 10 <= second <= first + Pace.LAG + 2
+        t0 = time.monotonic()            # no more reports: left behind after STALL s
+        assert wait_for(lambda: states[-1].seq > second + 2 * Pace.LAG, 60), states[-1].seq
+        assert time.monotonic() - t0 > Pace.STALL - 1.5    # held_at() took 1 s of it
+    finally:
+        _, _, err = stop_process(proc)
+    assert f'lock-step: {me} has made no progress for {Pace.STALL:g} s' in err, err
+    assert err.count('has made no progress') == 1
+
+
 def test_bad_params_file_stops_node_with_one_line(tmp_path):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('plant_sim:\n  ros__parameters:\n    sim_node:\n      seed: -4\n')

@@ -341,6 +341,50 @@ def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path):
     assert st.summary()['recording_recovered']['messages'] == stats.message_count
 
 
+def test_a_stalled_recorder_loses_nothing_in_lock_step(tmp_path, ros_node):
+    """Lock-step --record: the recorder SIGSTOPped for 3 s (a starved recorder: CI lost 169
+    commands in a row of an identification recording) holds the loop within Pace.LAG ticks
+    (nodes.common.Pace) instead of overrunning its queues; the run ends normally and the file
+    holds every state and every command, in order, with no gap."""
+    import time
+    from rclpy.qos import QoSProfile
+    from eha_msgs.msg import ActuatorState
+    from eha_ros.core.io.recording import read
+    from eha_ros.nodes.common import Pace
+    last = [0]
+    ros_node.create_subscription(ActuatorState, '/eha/state',
+                                 lambda m: last.__setitem__(0, m.seq), QoSProfile(depth=10))
+    st = Started(tmp_path, 'paced', '--duration', '12', '--record', '--mode', 'lockstep')
+    pid = None
+    try:
+        assert st.running(), ''.join(st.lines)[-4000:]
+        assert wait_for(lambda: last[0] >= 500, 120), last
+        pid = _child(st, 'recorder')
+        os.kill(pid, signal.SIGSTOP)
+        stopped_at = last[0]
+        time.sleep(3.0)
+        held_at = last[0]
+        os.kill(pid, signal.SIGCONT)
+        assert st.proc.wait(timeout=120) == 0, ''.join(st.lines)[-4000:]
+    finally:
+        if pid and _alive(pid):
+            os.kill(pid, signal.SIGCONT)
+        if st.proc.poll() is None:
+            st.proc.kill()
+    rec = read(str(st.folder / 'recording.mcap'), ['/eha/state', '/eha/command'])
+    loop = st.summary()['diagnostics']['plant_sim: loop']
+    print(f'recorder stopped at state {stopped_at}, loop held at {held_at}; '
+          f'{loop["recorder_waits"]} ticks waited; {len(rec["/eha/state"])} states, '
+          f'{len(rec["/eha/command"])} commands recorded')
+    assert held_at - stopped_at <= 2 * Pace.LAG, (stopped_at, held_at)
+    assert loop['recorder_waits'] > 0
+    for topic in ('/eha/state', '/eha/command'):
+        seqs = sorted({m.seq for _, m in rec[topic]})
+        assert seqs[0] <= 1 and seqs[-1] > held_at + 500, (topic, seqs[0], seqs[-1])
+        assert seqs == list(range(seqs[0], seqs[-1] + 1)), \
+            (topic, sorted(set(range(seqs[0], seqs[-1] + 1)) - set(seqs))[:20])
+
+
 def test_full_disk_is_reported_at_once_and_stack_json_written(tmp_path):
     """Issue 21 item 6: the run folder on a 2 MB file system (tmpfs in a user and mount
     namespace of its own): the recording fills it, the recorder reports ERROR at once,
@@ -413,7 +457,7 @@ def test_processes_in_real_time_are_stopped_when_they_cannot_hold_the_loop(tmp_p
     if summary['stop_reason'].startswith(('loop supervisor: unanswered: the loop cannot hold',
                                           'loop supervisor: limit_cycle: ')):
         assert r.returncode == 1 and 'run_stack: FAILED: stopped (loop supervisor' in r.stdout
-        assert summary['wall_s'] < 10
+        assert loop['ticks'] < 0.9 * 20 * 1000   # stopped by the supervisor before --duration
     else:
         assert summary['stop_reason'] == 'duration' and lost < 0.05, summary['stop_reason']
 

@@ -278,6 +278,76 @@ class MatchReport:
             return {}
 
 
+class ReceivedReport:
+    """How many messages a node (the recorder) has received per topic, for :class:`Pace`: JSON
+    {topic: count} on ``~/received``, published every PERIOD of wall time when it changed."""
+    TOPIC = 'received'
+    PERIOD = 0.01           # [s]
+
+    def __init__(self, node, counts: Callable[[], dict]):
+        from rclpy.clock import Clock, ClockType
+        from std_msgs.msg import String
+        self.msg, self.counts, self.last = String, counts, None
+        self.pub = node.create_publisher(String, f'~/{self.TOPIC}', 1)
+        node.create_timer(self.PERIOD, self.update, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def update(self):
+        counts = self.counts()
+        if counts != self.last:
+            self.last = counts
+            self.pub.publish(self.msg(data=json.dumps(counts, sort_keys=True)))
+
+
+class Pace:
+    """Lock-step back-pressure: a tick waits while a node named in ``names`` (the recorder) is
+    more than LAG messages behind on a stream this node counts (``counts``: {topic: messages
+    it sent or got}), by that node's :class:`ReceivedReport`; its queues hold
+    core.topics.STREAM (1000) messages, and a lock-step loop that runs ahead of a starved
+    recorder would overrun them. A node that has never reported is not waited for; one that
+    makes no progress for STALL s of wall time is left behind, with a warning (once)."""
+    LAG = 250
+    STALL = 5.0             # [s]
+
+    def __init__(self, node, names):
+        from std_msgs.msg import String
+        self.node = node
+        self.reports: dict[str, dict] = {}          # name -> {topic: received}
+        self.moved: dict[str, float] = {}           # name -> wall time of its last progress
+        self.dropped: set[str] = set()
+        self.waits = 0                              # ticks that waited
+        for name in (n for n in names if n):
+            node.create_subscription(String, f'{name}/{ReceivedReport.TOPIC}',
+                                     functools.partial(self._report, name), 10)
+
+    def _report(self, name, msg):
+        got = MatchReport.parse(msg.data)
+        if got != self.reports.get(name):
+            self.reports[name] = got
+            self.moved[name] = time.monotonic()
+
+    def behind(self, name: str, counts: dict) -> int:
+        got = self.reports[name]
+        return max((n - got[topic] for topic, n in counts.items() if topic in got), default=0)
+
+    def wait(self, counts: dict, running: Callable[[], bool]):
+        """Return once every followed node is at most LAG behind (or left behind)."""
+        waited = False
+        for name in list(self.reports):
+            since = time.monotonic()            # a caught-up report has not moved: fine
+            while name not in self.dropped and running() and \
+                    self.behind(name, counts) > self.LAG:
+                waited = True
+                if time.monotonic() - max(since, self.moved[name]) > self.STALL:
+                    self.dropped.add(name)
+                    self.node.get_logger().warning(
+                        f'lock-step: {name} has made no progress for {self.STALL:g} s, '
+                        f'{self.behind(name, counts)} messages behind: stepping on without '
+                        'waiting for it (its recording may miss messages)')
+                    break
+                time.sleep(0.001)
+        self.waits += waited
+
+
 class StartGate:
     """Start gate (the plant side's tick 0, an experiment's plan): held until every node named
     in ``names`` subscribes to every topic under ``prefix`` that has a publisher and has

@@ -7,7 +7,8 @@ the next sample, published as eha/state(k+1) (plus eha/sim/truth from the simula
 Real time: a loop thread with absolute deadlines (overruns counted, catch-up, resynchronised
 when more than MAX_CATCH_UP periods behind). Lock-step (<prefix>.lockstep): the loop thread
 steps when command(k) arrived, publishes /clock, re-publishes state(k) after lockstep_timeout;
-nodes.common.StartGate holds tick 0 (both modes) until a recorder listens.
+nodes.common.StartGate holds tick 0 (both modes) until a recorder listens; in lock-step,
+nodes.common.Pace holds a tick while that recorder is more than Pace.LAG messages behind.
 
 Lifecycle (lifecycle_msgs services ~/change_state, ~/get_state, ...):
 - configure: backend connected and checked (ads: link up, symbol table); the loop runs and
@@ -41,7 +42,7 @@ from ..core.hardware.interface import HardwareError
 from ..core.config.params import ParamError, Schema
 from ..core.stats import Counters, Histogram, RingStats
 from . import diag
-from .common import (PlantState, StartGate, bind, channel_ok, declare_and_validate,
+from .common import (Pace, PlantState, StartGate, bind, channel_ok, declare_and_validate,
                      publish_counted, qos_of)
 from .compose import unlocked
 from .managed import state_label, transition
@@ -134,6 +135,9 @@ class PlantSide(LifecycleNodeMixin):
             self, p[q + 'start_after'], self.state_topic.rsplit('/', 1)[0] + '/',
             p[q + 'start_timeout'],
             own=(self.pub_state,) + ((self.pub_truth,) if self.pub_truth else ()))
+        self.command_topic = self.resolve_topic_name(T.COMMAND.name)
+        self.sent = self.got = 0              # states published, commands received
+        self.pace = Pace(self, p[q + 'start_after']) if self.lockstep else None
         self.create_timer(p[q + 'diagnostics_period'], self.publish_diagnostics)
         self.create_timer(SUPERVISE_PERIOD, self.supervise)
         if self.want_configured:
@@ -278,6 +282,7 @@ class PlantSide(LifecycleNodeMixin):
 
     # ---- inputs (executor thread) ----
     def on_command(self, msg):
+        self.got += 1
         if msg.seq == self.k and self.gate.command_seq != self.k and self.state_time:
             self.latency.add(time.perf_counter() - self.state_time)
         with self.lock:
@@ -454,6 +459,9 @@ class PlantSide(LifecycleNodeMixin):
                 due = self.go_seq == self.k   # a late duplicate of an older command: no
             while due and self.k == 0 and self.running and not self.start_gate.poll():
                 time.sleep(0.02)              # StartGate: tick 0 waits for it
+            if due:                           # Pace: nor runs ahead of the recorder
+                self.pace.wait({self.state_topic: self.sent, self.command_topic: self.got},
+                               lambda: self.running)
             if self.running and due:
                 with self.callback_lock:
                     self.tick(self.Ts)
@@ -520,6 +528,7 @@ class PlantSide(LifecycleNodeMixin):
         s.header.stamp = stamp = self.stamp()
         s.seq = self.k
         self.state_time = time.perf_counter()
+        self.sent += 1
         publish_counted(self, self.pub_state, s, f'state {self.k}')
         if self.pub_truth is None or not self.pub_truth.get_subscription_count():
             return                            # nobody listens: skip building the truth
@@ -597,6 +606,8 @@ class PlantSide(LifecycleNodeMixin):
                   'transition_refused': self.transition_note}
         values.update(self.hw.values(now))
         values.update(self.c)
+        if self.pace is not None:
+            values['recorder_waits'] = self.pace.waits
         if g.link_fault or self.conflict or (label != 'unconfigured' and not g.link_up):
             level = diag.ERROR
             msg = self.conflict or ('link fault latched: ' + g.link_fault_reason

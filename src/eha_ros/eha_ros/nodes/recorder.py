@@ -4,7 +4,8 @@ Topics are discovered periodically (wall-time timer, nodes.tap: raw CDR with the
 QoS), so topics that appear later are caught.
 Messages go to a writer thread (core.io.mcap_sink) with log_time = receive time (wall clock) and
 publish_time = header stamp. On SIGINT/SIGTERM the queues are drained and the file finished;
-message counts per topic go to /diagnostics and to the log.
+message counts per topic go to /diagnostics and to the log. For the plant side: what DDS has
+matched (~/matched, its start gate) and what was received (~/received, lock-step pacing).
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ import time
 from ..core.io.mcap_sink import McapSink
 from ..core.io.recorder_params import SCHEMA
 from . import diag
-from .common import MatchReport, declare_and_validate, factory, run
+from .common import MatchReport, ReceivedReport, declare_and_validate, factory, run
 from .tap import TopicTap, qos_yaml
 
 
@@ -47,6 +48,7 @@ class Recorder:
         self.tap = TopicTap(self, p['recorder.namespace'], extra, p['recorder.depth'],
                             self.open_topic, 'recording')
         self.matched = MatchReport(self)     # what the plant side's start gate waits for
+        self.received = ReceivedReport(self, self.counts)   # what a lock-step plant paces on
         self.create_timer(p['recorder.discovery_period'], self.discover, clock=wall)
         self.get_logger().info(f'recorder: {self.tap.ns}/*{" + " if extra else ""}'
                                f'{", ".join(sorted(extra))} -> {self.output}')

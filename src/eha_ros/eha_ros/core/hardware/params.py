@@ -28,7 +28,9 @@ def loop_params(prefix: str, *, command_timeout: float, autostart: str,
         Param(f'{prefix}.start_after', 'str[]', '', [''], min_len=1,
               doc='hold tick 0 (real time: the loop\'s start) until these nodes subscribe to '
                   'every /eha topic with a publisher and report each publisher matched (their '
-                  '~/matched; run_stack --record adds the recorder); empty string = none'),
+                  '~/matched; run_stack --record adds the recorder); lock-step: no tick while '
+                  'one of them is too far behind (its ~/received, nodes.common.Pace); empty '
+                  'string = none'),
         Param(f'{prefix}.start_timeout', 'float', 's', 30.0, 0.0, 600.0,
               doc='start anyway (with a warning) after this wall time at tick 0'),
         Param(f'{prefix}.autostart', 'str', '', autostart, choices=AUTOSTART,
