@@ -85,9 +85,10 @@ def test_tuned_table_is_what_tune_estimator_writes(tmp_path):
     assert out.read_text() == text
     loaded = load(schema_for('estimator'), [os.path.join(CONFIG, 'plant.yaml'),
                                             os.path.join(CONFIG, 'estimator.yaml')])
-    for key, value in P.TUNED.items():
-        assert loaded['estimator.' + key] == value and type(value) is type(
-            loaded['estimator.' + key])
+    assert not any('estimator.' + key in loaded for key in P.TUNED)     # no parameters
+    for name in ('leakage', 'external_leakage', 'displacement', 'compliance', 'friction'):
+        p0, lo, hi = P.adaptive_prior(name)
+        assert p0 > 0 and lo < 0 < hi, name
 
 
 E, H = 'estimator:estimator.', 'switch_manager:switch.health.'
@@ -95,13 +96,11 @@ E, H = 'estimator:estimator.', 'switch_manager:switch.health.'
 TS2 = {'/**:plant.sim.Ts': 0.002, '/**:plant.sim.substeps': 32, '/**:plant.drive.delay': 0.002}
 # check -> (node, overrides that violate it, words of the one-line error: both keys, values)
 CASES = {
-    **{f'estimator {r} lo > hi': ('estimator', {f'{E}{r}': [0.5, 0.1]},
-                                  [f'estimator.{r} = [0.5, 0.1]', 'lo <= hi'])
-       for r in ('model.leakage_range', 'model.external_leakage_range',
-                 'model.displacement_range', 'model.compliance_range', 'model.friction_range',
-                 'noise.adapt_range')},
-    'estimator range of 3 values': ('estimator', {f'{E}model.friction_range': [-0.5, 0.0, 0.5]},
-                                    ['estimator.model.friction_range = [-0.5, 0.0, 0.5]']),
+    'estimator noise.adapt_range lo > hi': ('estimator', {f'{E}noise.adapt_range': [0.5, 0.1]},
+                                            ['estimator.noise.adapt_range = [0.5, 0.1]',
+                                             'lo <= hi']),
+    'estimator range of 3 values': ('estimator', {f'{E}noise.adapt_range': [0.5, 1.0, 2.0]},
+                                    ['estimator.noise.adapt_range = [0.5, 1.0, 2.0]']),
     'estimator pressure_min > pressure_max': (
         'estimator', {f'{E}validity.pressure_min': 2.0e6, f'{E}validity.pressure_max': 1.0e6},
         ['estimator.validity.pressure_min = 2000000.0', 'estimator.validity.pressure_max '

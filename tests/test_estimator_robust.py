@@ -418,14 +418,15 @@ def test_sensor_bands_follow_the_sensor_model(params):
 def test_drifting_states_walk_their_family_sigma_in_the_drift_time(params):
     """q of a drifting adaptive state is p0 Ts / drift_time (its family sigma in drift_time),
     the displacement's and friction's 0; the filter's Q carries it."""
-    from eha_ros.core.estimator.params import DRIFTING, drift_q
+    from eha_ros.core.estimator.params import DRIFTING, TUNED, drift_q
     m, ts = 'estimator.model.', params['plant.sim.Ts']
     for name in ('leakage', 'external_leakage', 'compliance', 'displacement', 'friction'):
-        want = params[m + f'p0_{name}'] * ts / params[m + 'drift_time'] if name in DRIFTING else 0
+        want = TUNED[f'model.p0_{name}'] * ts / params[m + 'drift_time'] \
+            if name in DRIFTING else 0
         assert drift_q(params, name) == want, name
     kf = Estimator({**params, m + 'drift_time': 1e3}).kf
     assert kf.Q[kf.i_compliance, kf.i_compliance] == pytest.approx(
-        params[m + 'p0_compliance'] * ts / 1e3, rel=1e-12)
+        TUNED['model.p0_compliance'] * ts / 1e3, rel=1e-12)
 
 
 # ------------------------------------------------------------------ why the friction model

@@ -1,7 +1,8 @@
 """tune_estimator: derive the estimator's adaptive-state variances and projection ranges from
 the Table 4.5 family and the robustness box (core.estimator.tuning), print them, and with
---write put them into their one home: the TUNED table of core/estimator/params.py, the
-defaults of those estimator.* keys (no YAML file restates them). Also printed: the sensor
+--write put them into their one home: the TUNED table of core/estimator/params.py, which the
+estimator reads (core.estimator.params.adaptive_prior; they are no parameters: they follow from
+the family, so a changed family is taken in by running this again). Also printed: the sensor
 bands the estimator derives at run time from plant.sensors (core.estimator.sensor_band).
 
 It reads no noise seed. A tuning is checked with campaigns on the tuning seeds 1-5

@@ -27,7 +27,7 @@ from . import sensor_band
 from . import stepper
 from .chamber_kf import ChamberKF
 from .model_kf import ModelKF
-from .params import drift_q, on
+from .params import adaptive_prior, drift_q, on
 from .pva import PvaKF
 
 # a motor-speed reading beyond this times the drive's speed reference limit
@@ -73,7 +73,7 @@ def build_filter(p: dict):
         m = e + 'model.'
         # the adaptive flow parameters need the measured pressures (the flow balance): none
         # with position-only measurements, where they are unobservable
-        lam, dlt, kap, phi, eps = ((drift_q(p, k), p[m + 'p0_' + k], *p[m + k + '_range'])
+        lam, dlt, kap, phi, eps = ((drift_q(p, k), *adaptive_prior(k))
                                    if on(p, 'adapt_' + k) and with_p else None
                                    for k in ('leakage', 'displacement', 'compliance', 'friction',
                                              'external_leakage'))

@@ -36,23 +36,21 @@ TUNED = {
 DRIFTING = ('leakage', 'external_leakage', 'compliance')
 
 
-def _adaptive(name, symbol, p0_max, lo, hi) -> list:
-    """The parameters of the adaptive model state of stage adapt_<name> (core.estimator.adapt):
-    initial variance p0_<name> and projection range (defaults: TUNED)."""
-    m = E + 'model.'
-    return [Param(m + f'p0_{name}', 'float', '', TUNED[f'model.p0_{name}'], 0.0, p0_max,
-                  doc=f'initial variance of {symbol} (its spread over the family)'),
-            Param(m + f'{name}_range', 'float[]', '', TUNED[f'model.{name}_range'], lo, hi,
-                  min_len=2, doc=f'projection range of {symbol} [lo, hi]')]
+def adaptive_prior(name: str) -> tuple[float, float, float]:
+    """(p0, lo, hi) of the adaptive model state of stage adapt_<name> (core.estimator.adapt):
+    its initial variance (its spread over the family) and projection range, from TUNED. Not
+    parameters: they follow from the family (config/qft_spec.yaml family.*, the random box);
+    a changed family is taken in with scripts/tune_estimator --write."""
+    lo, hi = TUNED[f'model.{name}_range']
+    return TUNED[f'model.p0_{name}'], lo, hi
 
 
 def drift_q(p: dict, name: str) -> float:
     """Per-step random-walk variance of adaptive state ``name``: p0_<name> Ts / drift_time for
     a DRIFTING one (its family sigma in drift_time), 0 for the others."""
-    m = E + 'model.'
     if name not in DRIFTING:
         return 0.0
-    return p[m + f'p0_{name}'] * p['plant.sim.Ts'] / p[m + 'drift_time']
+    return adaptive_prior(name)[0] * p['plant.sim.Ts'] / p[E + 'model.drift_time']
 
 
 @dataclass(frozen=True)
@@ -187,16 +185,11 @@ ESTIMATOR = Schema('estimator', [
           doc='normalised pressure innovation above which the force state takes q_load_jump'),
     Param(E + 'model.p0_load', 'float', 'N^2', 1e8, 0.0, 1e14,
           doc='initial variance of the external force (1e8: 10 kN sigma)'),
-    # adaptive model states and projection (chambers structure; core.estimator.adapt, issue 15):
-    # relative corrections of the uncertain flow parameters of Table 4.5 as random-walk states,
-    # projected onto their ranges. Defaults: TUNED (p0 and ranges DERIVED by
-    # tools/tune_estimator from the Table 4.5 family + box, core.estimator.tuning); the drifting
-    # ones random-walk by drift_q.
-    *_adaptive('leakage', 'lambda', 1e6, -1.0, 1e3),
-    *_adaptive('external_leakage', 'epsilon', 1e6, -1.0, 1e3),
-    *_adaptive('displacement', 'delta', 1.0, -0.9, 1.0),
-    *_adaptive('compliance', 'kappa', 10.0, -0.9, 10.0),
-    *_adaptive('friction', 'phi', 10.0, -0.99, 10.0),
+    # adaptive model states (chambers structure; core.estimator.adapt, issue 15): relative
+    # corrections of the uncertain flow parameters of Table 4.5 as random-walk states projected
+    # onto their ranges; p0 and ranges are no parameters (adaptive_prior: TUNED, DERIVED by
+    # tools/tune_estimator from the Table 4.5 family + box); the drifting ones random-walk by
+    # drift_q.
     Param(E + 'model.drift_time', 'float', 's', 1.0e6, 1.0, 1e15,
           doc='a drifting adaptive state (leakage, external_leakage, compliance: viscosity, '
               'entrained air and temperature move them in service) may random-walk by its '
@@ -287,14 +280,13 @@ ESTIMATOR = Schema('estimator', [
           doc='/diagnostics period'),
 ])
 
-RANGES = ('model.leakage_range', 'model.external_leakage_range', 'model.displacement_range',
-          'model.compliance_range', 'model.friction_range', 'noise.adapt_range')
+RANGES = ('noise.adapt_range',)
 LOWPASS = ('model.friction_lowpass', 'monitor.lowpass')
 
 
 def check_ranges(p: dict) -> None:
-    """Each [lo, hi] range (the adaptive states' projection ranges, noise.adapt_range) has two
-    values with lo <= hi; validity.pressure_min <= validity.pressure_max."""
+    """Each [lo, hi] range (noise.adapt_range) has two values with lo <= hi;
+    validity.pressure_min <= validity.pressure_max."""
     for key in RANGES:
         v = p[E + key]
         if len(v) != 2 or v[0] > v[1]:
