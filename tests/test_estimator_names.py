@@ -6,8 +6,9 @@ import pytest
 
 from eha_ros.core.estimator import stepper
 from eha_ros.core.estimator.estimator import Estimator
-from eha_ros.core.estimator.params import SCHEMA
+from eha_ros.core.estimator.params import SCHEMA, adaptive_prior
 
+ADAPTIVE = ('leakage', 'external_leakage', 'displacement', 'compliance', 'friction')
 # constants that are not one parameter's value, and what they are computed from
 DERIVED = {
     'x_max': 'plant stroke / 2 + estimator.POSITION_MARGIN',
@@ -34,6 +35,8 @@ DERIVED = {
     'detector': 'fault.* (fault_detector)',
     'max_abs_motor_speed': 'plant.drive.omega_max x estimator.MOTOR_SPEED_MARGIN',
     'offset_bound': 'plant.sensors.* (sensor_band)', 'F_s': 'plant.friction.F_s',
+    **{f'{name}_range': 'TUNED (adaptive_prior: derived from the family by tune_estimator)'
+       for name in ADAPTIVE},
 }
 
 
@@ -51,7 +54,7 @@ def test_every_constant_is_a_parameter_or_declared_derived(params):
     K = est.kernel[0]
     leaves = leaf_params()
     named = [f for f in K.dtype.names if f not in DERIVED]
-    assert len(named) >= 15, named            # many constants are a parameter's own value
+    assert len(named) >= 10, named            # many constants are a parameter's own value
     for f in named:
         assert f in leaves, f'{f}: neither a parameter name nor in DERIVED'
         value, want = np.atleast_1d(K[f][0]), np.atleast_1d(params[leaves[f]])
@@ -59,6 +62,9 @@ def test_every_constant_is_a_parameter_or_declared_derived(params):
             continue                          # that adaptive state is off: the range unused
         np.testing.assert_array_equal(value, np.asarray(want[:len(value)], float), err_msg=f)
     assert not set(DERIVED) - set(K.dtype.names), 'DERIVED names a constant that is gone'
+    for name in ADAPTIVE:                     # the adaptive states' ranges: the TUNED table's
+        if K[f'i_{name}'][0] >= 0:
+            np.testing.assert_array_equal(K[f'{name}_range'][0], adaptive_prior(name)[1:])
 
 
 def test_one_name_from_yaml_to_kernel(params):

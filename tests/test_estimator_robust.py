@@ -377,8 +377,10 @@ def test_monitor_verdicts_hold_and_severity():
 
 
 # ------------------------------------------------------------------ tuning
-def test_yaml_holds_the_tuning_derived_from_the_family(params):
-    """config/estimator.yaml carries what scripts/tune_estimator derives (4 digits)."""
+def test_tuned_table_holds_the_tuning_derived_from_the_family(params):
+    """The TUNED table the estimator reads (adaptive_prior) carries what scripts/tune_estimator
+    derives from config/qft_spec.yaml's family and the random box (4 digits)."""
+    from eha_ros.core.estimator.params import TUNED
     from eha_ros.tools import tune_estimator as T
     from eha_ros.core.qft.spec import load_spec
     spec = load_spec(os.path.join(ROOT, 'config', 'qft_spec.yaml'))
@@ -387,7 +389,7 @@ def test_yaml_holds_the_tuning_derived_from_the_family(params):
                         C_r=params['plant.pump.C_r'])
     for key, v in tuning.derive(inp)['values'].items():
         want = [float(T.fmt(a)) for a in v] if isinstance(v, list) else float(T.fmt(v))
-        assert params['estimator.' + key] == pytest.approx(want, rel=1e-12), key
+        assert TUNED[key] == pytest.approx(want, rel=1e-12), key
 
 
 def test_sensor_bands_follow_the_sensor_model(params):
