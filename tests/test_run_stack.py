@@ -305,6 +305,15 @@ def _child(st, name):
     return None
 
 
+def _release(st, pid):
+    """After a test that SIGSTOPped run_stack's child ``pid``: continue it if it lives, kill
+    run_stack if it still runs."""
+    if pid and _alive(pid):
+        os.kill(pid, signal.SIGCONT)
+    if st.proc.poll() is None:
+        st.proc.kill()
+
+
 def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path):
     """Issue 21 item 12: in real time the recording starts with the loop (the plant's start
     gate waits for the recorder: state seq 1 is in the file); a SIGKILLed recorder is
@@ -367,10 +376,7 @@ def test_a_stalled_recorder_loses_nothing_in_lock_step(tmp_path, ros_node):
         os.kill(pid, signal.SIGCONT)
         assert st.proc.wait(timeout=120) == 0, ''.join(st.lines)[-4000:]
     finally:
-        if pid and _alive(pid):
-            os.kill(pid, signal.SIGCONT)
-        if st.proc.poll() is None:
-            st.proc.kill()
+        _release(st, pid)
     rec = read(str(st.folder / 'recording.mcap'), ['/eha/state', '/eha/command'])
     loop = st.summary()['diagnostics']['plant_sim: loop']
     print(f'recorder stopped at state {stopped_at}, loop held at {held_at}; '
@@ -433,10 +439,7 @@ def test_bridge_link_loss_fails_the_run(tmp_path):
         os.kill(peer, signal.SIGSTOP)
         assert st.proc.wait(timeout=90) == 1, ''.join(st.lines)[-4000:]
     finally:
-        if peer and _alive(peer):
-            os.kill(peer, signal.SIGCONT)
-        if st.proc.poll() is None:
-            st.proc.kill()
+        _release(st, peer)
     text = ''.join(st.lines)
     assert 'run_stack: FAILED: stopped (loop supervisor: stalled: plant side stalled' in text, \
         text[-4000:]
