@@ -93,7 +93,7 @@ def main(argv=None) -> int:
           f'{b.z:.2f} sigma): offset bound {b.offset_bound * 1e6:.0f} um, DISAGREE band '
           f'{b.band * 1e6:.0f} um, jump step {b.jump_step * 1e6:.0f} um')
     for k, v in res['values'].items():
-        print(f'estimator.{k}: {fmt(v)}')
+        print(f'TUNED {k}: {fmt(v)}')
     if a.write:
         write(a.out, res['values'])
         print(f'written: {a.out}')
