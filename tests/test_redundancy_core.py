@@ -1,7 +1,9 @@
 """Redundancy switch manager core (thesis 3.4, Fig. 3.12, Table 3.4), batch, no DDS:
 debounce/hysteresis, the state machine and its valve sequence, commanded switch in the Table 3.4
 scenario, motor_fail automatic switch, 60 s without a false alarm, both failed -> safe state."""
+import collections
 import json
+import math
 import os
 import re
 import subprocess
@@ -385,3 +387,69 @@ def test_both_failed_in_loop_safe_state_holds_piston():
     x = r['x'][after]
     print(f'hold: piston moved {1e3 * (x[-1] - x[0]):.3f} mm in {r["t"][after][-1] - safe_t:.2f} s')
     assert abs(x[-1] - x[0]) < 2e-3
+
+
+# --------------------------------------------------------------------------- compiled path
+def test_manager_tick_equals_the_python_state_machine(params):
+    """The node's per-state path (core.redundancy.stepper.ManagerTick: compiled while nothing
+    happens) against SwitchManager.update on the same states: 16 runs of 3 s whose segments
+    trip and clear every monitor, faults on either drive, commanded switches, the safe state,
+    loop and band changes. The same select, state, events and health arrays on every tick."""
+    from eha_ros.core.redundancy import stepper as RS
+    rng = np.random.default_rng(7)
+    k_T, D_p = params['plant.motor.k_T'], params['plant.pump.D_p']
+    compiled = ticks = 0
+    kinds = collections.Counter()
+    for run in range(16):
+        py, fast = SwitchManager(params), SwitchManager(params)
+        tick = RS.ManagerTick(fast)
+        k = 0
+        while k < 3000:
+            n = int(rng.integers(20, 600))
+            sick = rng.choice(['none', 'none', 'speed', 'current', 'pressure', 'estimator',
+                               'fault', 'fault', 'nan_pressure'])
+            faulty = int(rng.integers(0, 2))
+            loop_ok = bool(rng.random() > 0.1)
+            band = None if rng.random() < 0.5 else (90.0, 110.0)
+            if rng.random() < 0.15:
+                c = int(rng.integers(0, 2))
+                assert py.request(c, 'test') == tick.request(c, 'test')
+            if rng.random() < 0.02:
+                assert py.safe_state('test') == tick.safe_state('test')
+            for _ in range(n):
+                sel = py.select
+                w, i, inn, pd = 100.0, 1.0 + 0.1 * rng.standard_normal(), 1e-5, None
+                flt = [False, False]
+                if sick == 'speed':
+                    w = -200.0
+                elif sick == 'current':
+                    i = 35.0
+                elif sick == 'pressure':
+                    i, pd = 10.0, 20e5
+                elif sick == 'estimator':
+                    inn = 2e-3
+                elif sick == 'fault':
+                    flt[faulty] = True
+                pd = k_T * i / D_p if pd is None else pd
+                speed = np.array([w if e else 0.0 for e in sel.drive_enable])
+                current = np.array([i if e else 0.0 for e in sel.drive_enable])
+                pa = math.nan if sick == 'nan_pressure' else 1e6 + pd
+                py.update(ChannelSample(k * 1e-3, 100.0, tuple(speed), tuple(current), pa, 1e6,
+                                        sel.drive_enable, tuple(flt), True, inn, True, loop_ok,
+                                        band), k)
+                packed = tick.a
+                tick.update(k * 1e-3, k, 100.0, band, loop_ok, speed, current, pa, 1e6,
+                            sel.drive_enable, flt, inn, True)
+                compiled += tick.a is packed           # re-packed only after the Python path
+                assert (fast.select, fast.name, fast.t, fast.seq) == \
+                    (py.select, py.name, py.t, py.seq), (run, k)
+                assert np.array_equal(fast.health.ms, py.health.ms, equal_nan=True), (run, k)
+                assert np.array_equal(fast.health.hs, py.health.hs, equal_nan=True), (run, k)
+                k += 1
+        ticks += k
+        assert [(e.kind, e.t, e.reason) for e in fast.events] == \
+            [(e.kind, e.t, e.reason) for e in py.events]
+        kinds.update(e.kind for e in py.events)
+    print(f'events {dict(kinds)}; {compiled} of {ticks} ticks compiled')
+    assert {'switch_start', 'switch_done', 'safe', 'degraded', 'restored'} <= set(kinds)
+    assert 0.9 * ticks < compiled < ticks - sum(kinds.values())

@@ -191,8 +191,8 @@ def _manager(a, u, w, i, pa, pb):
     c = 0
     for k in range(u.shape[0]):
         wk[0], wk[1], ik[0], ik[1] = w[0, k], w[1, k], i[0, k], i[1, k]
-        c += RS.supervise(a, k * 1e-3, k, u[k], wk, ik, pa[k], pb[k], reported, fault, 1e-5,
-                          True, steady, age, cmd)
+        c += RS.supervise(a, k * 1e-3, k, u[k], u[k], True, wk, ik, pa[k], pb[k], reported,
+                          fault, 1e-5, True, steady, age, cmd)
     return c
 
 

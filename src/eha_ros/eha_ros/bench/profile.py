@@ -19,6 +19,7 @@ import collections
 import os
 import re
 import shutil
+import sys
 import subprocess
 import tempfile
 import time
@@ -89,7 +90,8 @@ def profile(duration: float, log=print) -> dict:
     from ..core.config.cli import UsageError
     from ..monitor import DiagMonitor
     from ..stack import Stack, cpu_seconds
-    spy = shutil.which('py-spy')
+    # the venv's own py-spy first: scripts/bench runs the venv's python without its PATH
+    spy = shutil.which('py-spy', path=os.path.dirname(sys.executable)) or shutil.which('py-spy')
     if spy is None:
         raise UsageError('bench profile: py-spy not found (pip install py-spy; it is in '
                          'requirements.txt)')

@@ -22,7 +22,8 @@ from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, Positio
 from eha_msgs.srv import SwitchChannel
 
 from ..core.loop import safe_state as SAFE
-from ..core.redundancy import ChannelSample, EventLog, SwitchManager
+from ..core.redundancy import EventLog, SwitchManager
+from ..core.redundancy.stepper import ManagerTick
 from ..core.redundancy.params import SCHEMA
 from ..core.stats import Counters, LoopStats
 from ..core.loop.supervisor import LoopSupervisor, SupervisorParams
@@ -50,6 +51,7 @@ class SwitchManagerNode:
         self.arm_ticks = int(round(p['switch.node.arm_time'] / self.Ts))
         self.fresh_since, self.armed = None, False
         self.mgr = SwitchManager(p)
+        self.tick = ManagerTick(self.mgr)    # per state, compiled; every change goes through it
         self.log = EventLog(p['switch.node.log_dir'])
         self.lock = threading.Lock()
         self.c = Counters()
@@ -120,7 +122,7 @@ class SwitchManagerNode:
         self.supervise()
         if SAFE.position_fault(msg.consistency):
             with self.lock:
-                entered = self.mgr.safe_state(SAFE.manager_reason(msg.consistency))
+                entered = self.tick.safe_state(SAFE.manager_reason(msg.consistency))
             if entered:
                 self.c.bump('position_faults')
                 self.flush()                 # the lock goes out now, logged once
@@ -159,22 +161,20 @@ class SwitchManagerNode:
         oldest = msg.seq - self.max_cmd_age_ticks
         recent = [r for k, r in islice(reversed(self.refs), self.scan) if k >= oldest]
         band = (min(recent), max(recent)) if recent else None
-        s = ChannelSample(msg.seq * self.Ts, self.speed_ref, tuple(msg.motor_speed),
-                          tuple(msg.motor_current), msg.pressure_a, msg.pressure_b,
-                          tuple(bool(b) for b in msg.drive_enabled),
-                          tuple(bool(b) for b in msg.drive_fault), msg.valid,
-                          self.innovation, self.estimate_ok, self.armed and fresh, band)
         if not fresh:
             self.c.bump('states_without_fresh_command')
         with self.lock:
-            self.mgr.update(s, int(msg.seq))
+            self.tick.update(msg.seq * self.Ts, int(msg.seq), self.speed_ref, band,
+                             self.armed and fresh, msg.motor_speed, msg.motor_current,
+                             float(msg.pressure_a), float(msg.pressure_b), msg.drive_enabled,
+                             msg.drive_fault, self.innovation, self.estimate_ok)
         self.supervise()
         self.flush()
 
     def on_switch(self, req, resp):
         with self.lock:
             was_safe = self.mgr.name == 'FAILED_SAFE'
-            ok, text = self.mgr.request(int(req.channel), req.reason)
+            ok, text = self.tick.request(int(req.channel), req.reason)
             if ok and was_safe and self.sup.trip is not None:
                 self.sup.reset(time.monotonic())      # the operator left the safe state
                 self.sup_reported = None
@@ -197,7 +197,7 @@ class SwitchManagerNode:
             return
         self.sup_reported = trip
         with self.lock:
-            entered = self.mgr.safe_state(f'loop supervisor: {trip.message}')
+            entered = self.tick.safe_state(f'loop supervisor: {trip.message}')
         self.c.bump('supervisor_trips')
         then = f'safe state {self.p["switch.safe_mode"]}' if entered else \
             'already in the safe state'

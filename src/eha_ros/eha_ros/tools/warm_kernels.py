@@ -5,8 +5,8 @@ run_stack, campaign or identify after set-up loads machine code instead of compi
 Each kernel is compiled by running the code path that uses it, for a few ticks, with the
 types the stack passes: the closed loop tick by tick (what each node's core object runs) and
 in compiled segments (campaigns, batch), with the switch manager, a commanded switch and a
-motor fault; the estimator's real-time branches (lost and stale states); the identification's
-replays. It prints how many kernels numba compiled (0 when the cache already held them all).
+motor fault; the estimator's real-time branches (lost and stale states); the switch manager
+node's per-state kernel; the identification's replays. It prints how many kernels numba compiled (0 when the cache already held them all).
 
 usage: python -m eha_ros.tools.warm_kernels [--quiet]
 """
@@ -41,6 +41,19 @@ def _realtime() -> None:
     est.update(float('nan'), (0.0, 0.0), 5e5, 5e5, 0)
 
 
+def _switch_manager_node() -> None:
+    """The switch_manager node's per-state kernel (ManagerTick), with a message's types."""
+    import numpy as np
+    from ..core.redundancy import SwitchManager
+    from ..core.redundancy.params import SCHEMA
+    from ..core.redundancy.stepper import ManagerTick
+    from ..core.sim.batch import node_params
+    tick = ManagerTick(SwitchManager(node_params('switch_manager', SCHEMA)))
+    for k in range(5):
+        tick.update(k * 1e-3, k, 0.0, None, True, np.zeros(2), np.zeros(2), 1e6, 1e6,
+                    [True, False], [False, False], 0.0, True)
+
+
 def _identification() -> None:
     """The drive replay (Kp_w, Ki_w, delay, k_T fits) and the friction curve of eq. 3.33."""
     import numpy as np
@@ -57,7 +70,7 @@ def _identification() -> None:
 
 
 PATHS = (('closed loop', _closed_loop), ('real-time branches', _realtime),
-         ('identification', _identification))
+         ('switch manager node', _switch_manager_node), ('identification', _identification))
 
 
 def compiled(fn) -> int:

@@ -18,7 +18,7 @@ from numba import njit
 
 from ..jit_cache import drop_stale
 from ..kernel_records import Tensor3, Vector
-from .health import K_BLANK, available, health, healthy
+from .health import K_BLANK, ChannelSample, available, health, healthy
 from .state_machine import ACTIVE, DEGRADED, FAILED_SAFE, SWITCHING
 
 drop_stale(__file__)         # supervise() inlines health's kernels
@@ -66,11 +66,12 @@ def unpack(mgr, a: Arrays) -> None:
 
 
 @njit(cache=True)
-def supervise(a, t, seq, speed_ref, w_meas, i_meas, pa, pb, reported, fault, innovation,
-              estimate_ok, steady, age, cmd) -> bool:
+def supervise(a, t, seq, lo_ref, hi_ref, loop_ok, w_meas, i_meas, pa, pb, reported, fault,
+              innovation, estimate_ok, steady, age, cmd) -> bool:
     """SwitchManager.update; False when the state machine would act (a transition, a valve or
     drive step of a running switch): state to be rolled back, the tick done in Python.
-    ``a``: the :class:`Arrays`."""
+    ``a``: the :class:`Arrays`; lo_ref, hi_ref, loop_ok: as :func:`health` (a closed-loop
+    kernel knows the reference the drives apply: lo_ref = hi_ref, loop_ok True)."""
     k, mk, ms, hs, g = a.k, a.mk, a.ms, a.hs, a.g
     g[G_T] = t
     g[G_SEQ] = seq
@@ -81,8 +82,8 @@ def supervise(a, t, seq, speed_ref, w_meas, i_meas, pa, pb, reported, fault, inn
                      t - g[G_ROLE_SINCE] >= k[K_BLANK])
         age[c] = t - g[G_ENABLE_SINCE + c]
         cmd[c] = g[G_ENABLE + c] > 0.5
-    health(k, mk, ms, hs, t, speed_ref, speed_ref, w_meas, i_meas, pa, pb, reported, fault,
-           innovation, estimate_ok, True, cmd, steady, age)
+    health(k, mk, ms, hs, t, lo_ref, hi_ref, w_meas, i_meas, pa, pb, reported, fault,
+           innovation, estimate_ok, loop_ok, cmd, steady, age)
     if state == ST_FAILED:
         return True
     if state == ST_SWITCHING:       # _switching: target still available, no step due
@@ -94,3 +95,64 @@ def supervise(a, t, seq, speed_ref, w_meas, i_meas, pa, pb, reported, fault, inn
     ok_o = healthy(ms, o) and g[G_LATCHED + o] < 0.5
     want = ST_ACTIVE if ok_o else ST_DEGRADED
     return want == state
+
+
+@njit(cache=True)
+def node_update(a, keep_ms, keep_hs, t, seq, lo_ref, hi_ref, loop_ok, w_meas, i_meas, pa, pb,
+                reported, fault, innovation, estimate_ok, steady, age, cmd) -> bool:
+    """The switch_manager node's SwitchManager.update on one state: :func:`supervise`, and
+    where it returns False the health state as it was before (keep_*: scratch of ms's and
+    hs's shapes), for the Python state machine to take the tick."""
+    keep_ms[:] = a.ms
+    keep_hs[:] = a.hs
+    if supervise(a, t, seq, lo_ref, hi_ref, loop_ok, w_meas, i_meas, pa, pb, reported, fault,
+                 innovation, estimate_ok, steady, age, cmd):
+        return True
+    a.ms[:] = keep_ms
+    a.hs[:] = keep_hs
+    return False
+
+
+class ManagerTick:
+    """A SwitchManager fed one state at a time from its raw fields (the switch_manager node):
+    :func:`node_update` while the state machine would not act, else the Python
+    ``SwitchManager.update`` on a :class:`ChannelSample` of the same values (same numbers:
+    the same kernels on the same arrays). The manager's other changes go through
+    :meth:`safe_state` and :meth:`request`, which re-pack its :class:`Arrays`."""
+
+    def __init__(self, mgr):
+        self.mgr = mgr
+        self.a = pack(mgr)
+        self.keep_ms, self.keep_hs = np.empty_like(self.a.ms), np.empty_like(self.a.hs)
+        self.reported, self.fault = np.zeros(2, np.bool_), np.zeros(2, np.bool_)
+        self.steady, self.cmd, self.age = np.zeros(2, np.bool_), np.zeros(2, np.bool_), \
+            np.zeros(2)
+
+    def update(self, t: float, seq: int, speed_ref: float, band, loop_ok: bool, speed,
+               current, pa: float, pb: float, enabled, fault, innovation: float,
+               estimate_ok: bool) -> None:
+        """One state: ``speed``, ``current`` float64 arrays of both couples (the message's
+        own), ``enabled``, ``fault`` pairs of bools; ``band``: (lo, hi) of the speed
+        references the drives may apply now, or None (speed_ref exactly)."""
+        lo, hi = band or (speed_ref, speed_ref)
+        r, f = self.reported, self.fault
+        r[0], r[1], f[0], f[1] = enabled[0], enabled[1], fault[0], fault[1]
+        if node_update(self.a, self.keep_ms, self.keep_hs, t, seq, float(lo), float(hi),
+                       loop_ok, speed, current, pa, pb, r, f, innovation, estimate_ok,
+                       self.steady, self.age, self.cmd):
+            self.mgr.t, self.mgr.seq = t, seq
+            return
+        self.mgr.update(ChannelSample(t, speed_ref, tuple(speed), tuple(current), pa, pb,
+                                      (bool(r[0]), bool(r[1])), (bool(f[0]), bool(f[1])),
+                                      True, innovation, estimate_ok, loop_ok, band), seq)
+        self.a = pack(self.mgr)
+
+    def safe_state(self, reason: str) -> bool:
+        entered = self.mgr.safe_state(reason)
+        self.a = pack(self.mgr)
+        return entered
+
+    def request(self, channel: int, reason: str = '') -> tuple:
+        out = self.mgr.request(channel, reason)
+        self.a = pack(self.mgr)
+        return out

@@ -186,8 +186,8 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         # a position fault (core.loop.safe_state) is Python's: rolled back, then done by BatchLoop
         ok = math.isfinite(x_hat) and not (has_est and ES.position_fault(ee))
         if ok and has_mgr:
-            ok = RS.supervise(mgr, k * Ts, k, u, w_meas, i_meas, pa, pb, reported, fault,
-                              innov, nd > 0 and code == 0, steady, age, cmd)
+            ok = RS.supervise(mgr, k * Ts, k, u, u, True, w_meas, i_meas, pa, pb, reported,
+                              fault, innov, nd > 0 and code == 0, steady, age, cmd)
         un = math.nan
         if ok:
             un = CS.control(ck, cc, ca, x_hat, w_act)
