@@ -392,25 +392,27 @@ def test_both_failed_in_loop_safe_state_holds_piston():
 # --------------------------------------------------------------------------- compiled path
 def test_manager_tick_equals_the_python_state_machine(params):
     """The node's per-state path (core.redundancy.stepper.ManagerTick: compiled while nothing
-    happens) against SwitchManager.update on the same states: 16 runs of 3 s whose segments
+    happens) against SwitchManager.update on the same states: 24 runs of 3 s whose segments
     trip and clear every monitor, faults on either drive, commanded switches, the safe state,
-    loop and band changes. The same select, state, events and health arrays on every tick."""
+    the loop open, commands lost, late and spread (the band of references the node's deque
+    gave). The same select, state, events and health arrays on every tick."""
     from eha_ros.core.redundancy import stepper as RS
     rng = np.random.default_rng(7)
     k_T, D_p = params['plant.motor.k_T'], params['plant.pump.D_p']
     compiled = ticks = 0
     kinds = collections.Counter()
-    for run in range(16):
+    for run in range(24):
         py, fast = SwitchManager(params), SwitchManager(params)
-        tick = RS.ManagerTick(fast)
-        k = 0
+        tick = RS.ManagerTick(fast, max_age=50, scan=108)
+        refs = collections.deque(maxlen=256)
+        k, ref = 0, 100.0
         while k < 3000:
             n = int(rng.integers(20, 600))
             sick = rng.choice(['none', 'none', 'speed', 'current', 'pressure', 'estimator',
                                'fault', 'fault', 'nan_pressure'])
             faulty = int(rng.integers(0, 2))
             loop_ok = bool(rng.random() > 0.1)
-            band = None if rng.random() < 0.5 else (90.0, 110.0)
+            spread = 0.0 if rng.random() < 0.5 else 10.0       # the commands' references
             if rng.random() < 0.15:
                 c = int(rng.integers(0, 2))
                 assert py.request(c, 'test') == tick.request(c, 'test')
@@ -434,11 +436,19 @@ def test_manager_tick_equals_the_python_state_machine(params):
                 speed = np.array([w if e else 0.0 for e in sel.drive_enable])
                 current = np.array([i if e else 0.0 for e in sel.drive_enable])
                 pa = math.nan if sick == 'nan_pressure' else 1e6 + pd
-                py.update(ChannelSample(k * 1e-3, 100.0, tuple(speed), tuple(current), pa, 1e6,
+                if rng.random() < 0.9:          # a command, sometimes lost or late
+                    ref = 100.0 + spread * rng.standard_normal()
+                    cmd = k - int(rng.integers(0, 3))
+                    refs.append((cmd, ref))
+                    tick.command(cmd, ref)
+                # the node's band before ManagerTick kept it: the deque, the last 108, 50 ticks
+                recent = [r for c, r in list(refs)[::-1][:108] if c >= k - 50]
+                band = (min(recent), max(recent)) if recent else None
+                py.update(ChannelSample(k * 1e-3, ref, tuple(speed), tuple(current), pa, 1e6,
                                         sel.drive_enable, tuple(flt), True, inn, True, loop_ok,
                                         band), k)
                 packed = tick.a
-                tick.update(k * 1e-3, k, 100.0, band, loop_ok, speed, current, pa, 1e6,
+                tick.update(k * 1e-3, k, ref, loop_ok, speed, current, pa, 1e6,
                             sel.drive_enable, flt, inn, True)
                 compiled += tick.a is packed           # re-packed only after the Python path
                 assert (fast.select, fast.name, fast.t, fast.seq) == \
@@ -452,4 +462,4 @@ def test_manager_tick_equals_the_python_state_machine(params):
         kinds.update(e.kind for e in py.events)
     print(f'events {dict(kinds)}; {compiled} of {ticks} ticks compiled')
     assert {'switch_start', 'switch_done', 'safe', 'degraded', 'restored'} <= set(kinds)
-    assert 0.9 * ticks < compiled < ticks - sum(kinds.values())
+    assert 0.9 * ticks < compiled < ticks - 50       # both paths taken

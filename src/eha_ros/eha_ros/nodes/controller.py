@@ -14,10 +14,10 @@ configure: nothing to connect (parameters are validated at start-up); activate: 
 the next fresh estimate; deactivate / cleanup / error: zero output."""
 from __future__ import annotations
 
+import math
 import sys
 import time
 
-import numpy as np
 from eha_msgs.msg import ActuatorCommand, PositionEstimate, PositionReference, RedundancyStatus
 from lifecycle_msgs.msg import State
 from rclpy.lifecycle import LifecycleNodeMixin, TransitionCallbackReturn as Ret
@@ -223,7 +223,7 @@ class Controller(LifecycleNodeMixin):
         self.last_seq = msg.seq
         for position in self.sync.due(msg.seq):
             self.apply_reference(position)
-        fresh = not msg.stale and np.isfinite(msg.position)
+        fresh = not msg.stale and math.isfinite(msg.position)
         if not fresh:
             self.c.bump('stale_estimates')
         if fresh:

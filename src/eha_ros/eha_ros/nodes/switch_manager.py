@@ -14,8 +14,6 @@ import math
 import sys
 import threading
 import time
-from collections import deque
-from itertools import islice
 
 from eha_msgs.msg import (ActuatorCommand, ActuatorState, ChannelSelect, PositionEstimate,
                           RedundancyStatus)
@@ -23,7 +21,7 @@ from eha_msgs.srv import SwitchChannel
 
 from ..core.loop import safe_state as SAFE
 from ..core.redundancy import EventLog, SwitchManager
-from ..core.redundancy.stepper import ManagerTick
+from ..core.redundancy import stepper as RS
 from ..core.redundancy.params import SCHEMA
 from ..core.stats import Counters, LoopStats
 from ..core.loop.supervisor import LoopSupervisor, SupervisorParams
@@ -33,7 +31,7 @@ from ..core import topics as T
 
 
 def _finite(*values) -> bool:
-    return all(math.isfinite(v) for v in values)
+    return all(map(math.isfinite, values))
 
 
 SUPERVISOR_CHECK = 0.02      # [s] wall-clock period of the supervisor's stall check
@@ -51,15 +49,15 @@ class SwitchManagerNode:
         self.arm_ticks = int(round(p['switch.node.arm_time'] / self.Ts))
         self.fresh_since, self.armed = None, False
         self.mgr = SwitchManager(p)
-        self.tick = ManagerTick(self.mgr)    # per state, compiled; every change goes through it
+        # per state, compiled; every change of the manager goes through it
+        self.tick = RS.ManagerTick(self.mgr, self.max_cmd_age_ticks,
+                                min(RS.WINDOW, 2 * self.max_cmd_age_ticks + 8))
         self.log = EventLog(p['switch.node.log_dir'])
         self.lock = threading.Lock()
         self.c = Counters()
         self.loop = LoopStats(self.Ts)
         self.speed_ref = 0.0
         self.cmd_seq = None
-        self.refs = deque(maxlen=256)    # (seq, speed ref) of recent commands
-        self.scan = min(256, 2 * self.max_cmd_age_ticks + 8)
         self.innovation, self.estimate_ok = float('nan'), False
         self.last_state_time = None
         self.state_stale = False
@@ -106,7 +104,7 @@ class SwitchManagerNode:
             return
         self.speed_ref = float(msg.motor_speed_ref)
         self.cmd_seq = int(msg.seq)
-        self.refs.append((self.cmd_seq, self.speed_ref))
+        self.tick.command(self.cmd_seq, self.speed_ref)
         self.sup.command(self.cmd_seq, self.speed_ref, time.monotonic())
         self.supervise()
 
@@ -131,14 +129,13 @@ class SwitchManagerNode:
         self.loop.timed(self.handle_state, msg)
 
     def handle_state(self, msg):
-        values = (msg.position, msg.pressure_a, msg.pressure_b, *msg.motor_speed,
-                  *msg.motor_current)
+        speed, current = msg.motor_speed, msg.motor_current
         if self.last_seq is not None and msg.seq > self.last_seq + 1:
             self.c.bump('lost_states', int(msg.seq - self.last_seq - 1))
         self.last_seq = msg.seq
         self.last_state_time = now = time.monotonic()
         self.sup.state(int(msg.seq), now)      # arrived: the loop's timing counts it
-        if not _finite(*values[3:]) or not msg.valid:
+        if not (msg.valid and _finite(speed[0], speed[1], current[0], current[1])):
             # speeds/currents are what the monitors judge: a bad sample is not evidence
             # (a repeated device sample is published not valid: the bridge's catch-up)
             self.c.bump('rejected_states')
@@ -155,17 +152,11 @@ class SwitchManagerNode:
             self.armed = True               # once: the start-up transient is over
             self.get_logger().info(f'position loop closed for '
                                    f'{self.p["switch.node.arm_time"]:g} s: monitors armed')
-        # which command the drive applies now is not known here (DDS latency): the speed
-        # error is measured from the range of the references of the last window
-        # (commands come once per tick: the window is within the newest entries)
-        oldest = msg.seq - self.max_cmd_age_ticks
-        recent = [r for k, r in islice(reversed(self.refs), self.scan) if k >= oldest]
-        band = (min(recent), max(recent)) if recent else None
         if not fresh:
             self.c.bump('states_without_fresh_command')
-        with self.lock:
-            self.tick.update(msg.seq * self.Ts, int(msg.seq), self.speed_ref, band,
-                             self.armed and fresh, msg.motor_speed, msg.motor_current,
+        with self.lock:     # the speed error from the band of recent references (ManagerTick)
+            self.tick.update(msg.seq * self.Ts, int(msg.seq), self.speed_ref,
+                             self.armed and fresh, speed, current,
                              float(msg.pressure_a), float(msg.pressure_b), msg.drive_enabled,
                              msg.drive_fault, self.innovation, self.estimate_ok)
         self.supervise()

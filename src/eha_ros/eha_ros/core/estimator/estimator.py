@@ -230,7 +230,7 @@ class Estimator:
 
     def _pressure_ok(self, pa, pb) -> bool:
         lo, hi = self.pressure_min, self.pressure_max
-        return all(math.isfinite(v) and lo <= v <= hi for v in (pa, pb))
+        return math.isfinite(pa) and math.isfinite(pb) and lo <= pa <= hi and lo <= pb <= hi
 
     def _speed(self, motor_speed, active_channel):
         """Active channel's speed if valid, else the last good one (counted)."""
@@ -265,8 +265,9 @@ class Estimator:
             w, why_w = self._speed(motor_speed, active_channel)
             pos_ok = self._position_ok(position)
             pr_ok = self._pressure_ok(pressure_a, pressure_b)
-            reasons = [r for r in (why_w, '' if pos_ok else 'position',
-                                   '' if pr_ok or not self.use_pressure else 'pressure') if r]
+            reasons = [] if pos_ok and (pr_ok or not self.use_pressure) and not why_w else \
+                [r for r in (why_w, '' if pos_ok else 'position',
+                             '' if pr_ok or not self.use_pressure else 'pressure') if r]
             if not pos_ok:
                 self.counters.bump('rejected_position')
             if not pr_ok and self.use_pressure:

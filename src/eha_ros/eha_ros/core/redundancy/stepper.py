@@ -97,15 +97,36 @@ def supervise(a, t, seq, lo_ref, hi_ref, loop_ok, w_meas, i_meas, pa, pb, report
     return want == state
 
 
+WINDOW = 256          # commands kept for the speed-reference band (ManagerTick)
+
+
 @njit(cache=True)
-def node_update(a, keep_ms, keep_hs, t, seq, lo_ref, hi_ref, loop_ok, w_meas, i_meas, pa, pb,
-                reported, fault, innovation, estimate_ok, steady, age, cmd) -> bool:
-    """The switch_manager node's SwitchManager.update on one state: :func:`supervise`, and
-    where it returns False the health state as it was before (keep_*: scratch of ms's and
-    hs's shapes), for the Python state machine to take the tick."""
+def band(seqs, refs, n, scan, oldest):
+    """(count, lo, hi) of the references of the newest ``scan`` of the ``n`` commands in the
+    ring (seqs, refs; entry n - 1 % WINDOW the newest) whose seq is at least ``oldest``."""
+    lo, hi, count = math.inf, -math.inf, 0
+    for j in range(min(scan, n, WINDOW)):
+        i = (n - 1 - j) % WINDOW
+        if seqs[i] >= oldest:
+            r = refs[i]
+            lo, hi, count = min(lo, r), max(hi, r), count + 1
+    return count, lo, hi
+
+
+@njit(cache=True)
+def node_update(a, keep_ms, keep_hs, seqs, refs, n, scan, oldest, t, seq, speed_ref, loop_ok,
+                w_meas, i_meas, pa, pb, reported, fault, innovation, estimate_ok, steady, age,
+                cmd) -> bool:
+    """The switch_manager node's SwitchManager.update on one state: :func:`supervise` with the
+    :func:`band` of the recent commands (none: speed_ref exactly), and where it returns False
+    the health state as it was before (keep_*: scratch of ms's and hs's shapes), for the
+    Python state machine to take the tick."""
+    count, lo, hi = band(seqs, refs, n, scan, oldest)
+    if count == 0:
+        lo = hi = speed_ref
     keep_ms[:] = a.ms
     keep_hs[:] = a.hs
-    if supervise(a, t, seq, lo_ref, hi_ref, loop_ok, w_meas, i_meas, pa, pb, reported, fault,
+    if supervise(a, t, seq, lo, hi, loop_ok, w_meas, i_meas, pa, pb, reported, fault,
                  innovation, estimate_ok, steady, age, cmd):
         return True
     a.ms[:] = keep_ms
@@ -118,33 +139,46 @@ class ManagerTick:
     :func:`node_update` while the state machine would not act, else the Python
     ``SwitchManager.update`` on a :class:`ChannelSample` of the same values (same numbers:
     the same kernels on the same arrays). The manager's other changes go through
-    :meth:`safe_state` and :meth:`request`, which re-pack its :class:`Arrays`."""
+    :meth:`safe_state` and :meth:`request`, which re-pack its :class:`Arrays`.
 
-    def __init__(self, mgr):
+    The drives may be applying any of the references of the last ``max_age`` ticks (which
+    command a drive applies now is unknown, DDS latency): :meth:`command` keeps the recent
+    ones, the speed monitor measures from the range of those at most ``max_age`` older than
+    the state (among the newest ``scan``: commands come once per tick)."""
+
+    def __init__(self, mgr, max_age: int, scan: int):
         self.mgr = mgr
         self.a = pack(mgr)
+        self.max_age, self.scan = max_age, scan
+        self.seqs, self.refs, self.n = np.zeros(WINDOW, np.int64), np.zeros(WINDOW), 0
         self.keep_ms, self.keep_hs = np.empty_like(self.a.ms), np.empty_like(self.a.hs)
         self.reported, self.fault = np.zeros(2, np.bool_), np.zeros(2, np.bool_)
         self.steady, self.cmd, self.age = np.zeros(2, np.bool_), np.zeros(2, np.bool_), \
             np.zeros(2)
 
-    def update(self, t: float, seq: int, speed_ref: float, band, loop_ok: bool, speed,
-               current, pa: float, pb: float, enabled, fault, innovation: float,
+    def command(self, seq: int, speed_ref: float) -> None:
+        i = self.n % WINDOW
+        self.seqs[i], self.refs[i] = seq, speed_ref
+        self.n += 1
+
+    def update(self, t: float, seq: int, speed_ref: float, loop_ok: bool, speed, current,
+               pa: float, pb: float, enabled, fault, innovation: float,
                estimate_ok: bool) -> None:
         """One state: ``speed``, ``current`` float64 arrays of both couples (the message's
-        own), ``enabled``, ``fault`` pairs of bools; ``band``: (lo, hi) of the speed
-        references the drives may apply now, or None (speed_ref exactly)."""
-        lo, hi = band or (speed_ref, speed_ref)
+        own), ``enabled``, ``fault`` pairs of bools, ``speed_ref`` the latest command's."""
         r, f = self.reported, self.fault
         r[0], r[1], f[0], f[1] = enabled[0], enabled[1], fault[0], fault[1]
-        if node_update(self.a, self.keep_ms, self.keep_hs, t, seq, float(lo), float(hi),
-                       loop_ok, speed, current, pa, pb, r, f, innovation, estimate_ok,
-                       self.steady, self.age, self.cmd):
+        oldest = seq - self.max_age
+        if node_update(self.a, self.keep_ms, self.keep_hs, self.seqs, self.refs, self.n,
+                       self.scan, oldest, t, seq, speed_ref, loop_ok, speed, current, pa, pb,
+                       r, f, innovation, estimate_ok, self.steady, self.age, self.cmd):
             self.mgr.t, self.mgr.seq = t, seq
             return
+        count, lo, hi = band(self.seqs, self.refs, self.n, self.scan, oldest)
         self.mgr.update(ChannelSample(t, speed_ref, tuple(speed), tuple(current), pa, pb,
                                       (bool(r[0]), bool(r[1])), (bool(f[0]), bool(f[1])),
-                                      True, innovation, estimate_ok, loop_ok, band), seq)
+                                      True, innovation, estimate_ok, loop_ok,
+                                      (lo, hi) if count else None), seq)
         self.a = pack(self.mgr)
 
     def safe_state(self, reason: str) -> bool:
