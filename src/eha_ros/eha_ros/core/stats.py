@@ -46,12 +46,13 @@ class Histogram:
 
     def __init__(self, bin_s: float = 10e-6, top_s: float = 0.05):
         self.bin = bin_s
-        self.counts = np.zeros(int(round(top_s / bin_s)) + 1, dtype=np.int64)   # last: overflow
+        self.counts = [0] * (int(round(top_s / bin_s)) + 1)     # last: overflow (a list: cheap)
+        self.top = len(self.counts) - 1
         self.n = 0
         self.max = 0.0
 
     def add(self, value: float):
-        i = min(int(value / self.bin), len(self.counts) - 1)
+        i = min(int(value / self.bin), self.top)
         self.counts[i] += 1
         self.n += 1
         if value > self.max:
@@ -67,7 +68,7 @@ class Histogram:
     def fraction_below(self, limit: float) -> float:
         if self.n == 0:
             return 0.0
-        return float(self.counts[:int(limit / self.bin)].sum()) / self.n
+        return float(sum(self.counts[:int(limit / self.bin)])) / self.n
 
 
 class LoopStats:

@@ -86,7 +86,7 @@ class LocalPublisher:
         return self._remote
 
     def publish(self, msg):
-        with self.bus.lock:
+        with self.bus.lock:           # the co-located callbacks run under it (Bus.guard's lock)
             if self.latched:          # transient local: a later local subscriber gets it too
                 self.bus.latched[self.topic] = msg
             for callback in self.bus.subscribers.get(self.topic, ()):
@@ -139,9 +139,10 @@ def composed_base(bus: Bus):
             name = self.resolve_topic_name(topic)
             guarded = bus.guard(callback)
             with bus.lock:          # a callback may subscribe from outside the lock (live)
-                bus.subscribers[name].append(guarded)
+                # in-process deliveries run under the lock LocalPublisher.publish holds
+                bus.subscribers[name].append(callback)
                 if name in bus.latched and is_latched(qos_profile):
-                    guarded(bus.latched[name])       # as DDS does for a late joiner
+                    callback(bus.latched[name])      # as DDS does for a late joiner
             if bus.final:
                 if name not in bus.published:
                     return self.dds_subscription(name, msg_type, guarded, qos_profile, **kwargs)

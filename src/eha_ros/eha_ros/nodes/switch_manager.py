@@ -30,10 +30,6 @@ from .common import declare_and_validate, factory, publish_counted, qos_of, run
 from ..core import topics as T
 
 
-def _finite(*values) -> bool:
-    return all(map(math.isfinite, values))
-
-
 SUPERVISOR_CHECK = 0.02      # [s] wall-clock period of the supervisor's stall check
 
 
@@ -99,7 +95,7 @@ class SwitchManagerNode:
 
     # ---- inputs ----
     def on_command(self, msg):
-        if not _finite(msg.motor_speed_ref):
+        if not math.isfinite(msg.motor_speed_ref):
             self.c.bump('rejected_commands')
             return
         self.speed_ref = float(msg.motor_speed_ref)
@@ -109,7 +105,7 @@ class SwitchManagerNode:
         self.supervise()
 
     def on_estimate(self, msg):
-        if not _finite(msg.innovation):
+        if not math.isfinite(msg.innovation):
             self.c.bump('rejected_estimates')
             self.estimate_ok = False
             return
@@ -135,7 +131,9 @@ class SwitchManagerNode:
         self.last_seq = msg.seq
         self.last_state_time = now = time.monotonic()
         self.sup.state(int(msg.seq), now)      # arrived: the loop's timing counts it
-        if not (msg.valid and _finite(speed[0], speed[1], current[0], current[1])):
+        finite = math.isfinite
+        if not (msg.valid and finite(speed[0]) and finite(speed[1]) and finite(current[0])
+                and finite(current[1])):
             # speeds/currents are what the monitors judge: a bad sample is not evidence
             # (a repeated device sample is published not valid: the bridge's catch-up)
             self.c.bump('rejected_states')
@@ -214,7 +212,7 @@ class SwitchManagerNode:
             events = self.mgr.events[self.logged:]
             self.logged = len(self.mgr.events)
             seq = self.mgr.seq
-        if sel != self.sent_select:
+        if sel is not self.sent_select and sel != self.sent_select:
             m = self.Select()
             m.header.stamp = self.get_clock().now().to_msg()
             m.seq = int(seq)
