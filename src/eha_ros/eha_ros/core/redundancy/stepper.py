@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from ..jit_cache import drop_stale
-from ..kernel_records import Tensor3, Vector
+from ..kernel_records import Tensor3, Vector, entry_point
 from .health import K_BLANK, ChannelSample, available, health, healthy
 from .state_machine import ACTIVE, DEGRADED, FAILED_SAFE, SWITCHING
 
@@ -155,6 +155,11 @@ class ManagerTick:
         self.reported, self.fault = np.zeros(2, np.bool_), np.zeros(2, np.bool_)
         self.steady, self.cmd, self.age = np.zeros(2, np.bool_), np.zeros(2, np.bool_), \
             np.zeros(2)
+        # per state from Python: the compiled function for these types (no dispatch)
+        self._update = entry_point(node_update, self.a, self.keep_ms, self.keep_hs, self.seqs,
+                                   self.refs, 0, 0, 0, 0.0, 0, 0.0, True, np.zeros(2),
+                                   np.zeros(2), 0.0, 0.0, self.reported, self.fault, 0.0, True,
+                                   self.steady, self.age, self.cmd)
 
     def command(self, seq: int, speed_ref: float) -> None:
         i = self.n % WINDOW
@@ -169,9 +174,9 @@ class ManagerTick:
         r, f = self.reported, self.fault
         r[0], r[1], f[0], f[1] = enabled[0], enabled[1], fault[0], fault[1]
         oldest = seq - self.max_age
-        if node_update(self.a, self.keep_ms, self.keep_hs, self.seqs, self.refs, self.n,
-                       self.scan, oldest, t, seq, speed_ref, loop_ok, speed, current, pa, pb,
-                       r, f, innovation, estimate_ok, self.steady, self.age, self.cmd):
+        if self._update(self.a, self.keep_ms, self.keep_hs, self.seqs, self.refs, self.n,
+                        self.scan, oldest, t, seq, speed_ref, loop_ok, speed, current, pa, pb,
+                        r, f, innovation, estimate_ok, self.steady, self.age, self.cmd):
             self.mgr.t, self.mgr.seq = t, seq
             return
         count, lo, hi = band(self.seqs, self.refs, self.n, self.scan, oldest)
