@@ -130,6 +130,42 @@ def test_in_process_subscriber_counts_only_while_it_wants_messages():
     assert got == ['m', 'm']
 
 
+def test_in_process_publisher_sends_dds_the_message_as_cdr_bytes():
+    """compose.LocalPublisher: with a listener outside the process, DDS gets the message as
+    CDR bytes from core.io.cdr (one struct.pack), which rclpy decodes to the same message; a
+    type cdr cannot lay out goes as the message itself."""
+    import numpy as np
+    from rclpy.serialization import deserialize_message
+    from eha_msgs.msg import ActuatorState
+    from eha_ros.nodes.compose import Bus, LocalPublisher
+
+    class Dds:
+        msg_type = ActuatorState
+
+        def __init__(self):
+            self.sent = []
+
+        def get_subscription_count(self):
+            return 1
+
+        def publish(self, msg):
+            self.sent.append(msg)
+    dds = Dds()
+    pub = LocalPublisher(Bus(), '/eha/state', dds, latched=False)
+    m = ActuatorState(seq=12345, position=0.0123, pressure_a=3.2e6, pressure_b=1.1e6,
+                      active_channel=1, valid=True)
+    m.header.stamp.sec, m.header.stamp.nanosec = 17, 999
+    m.motor_speed = np.array([123.5, -4.25])
+    m.drive_enabled = [False, True]
+    pub.publish(m)
+    assert isinstance(dds.sent[0], bytes)
+    assert deserialize_message(dds.sent[0], ActuatorState) == m
+    dds.msg_type = None                       # not a message class: no encoder
+    pub = LocalPublisher(Bus(), '/eha/state', dds, latched=False)
+    pub.publish(m)
+    assert dds.sent[1] is m
+
+
 def test_decimation_entries():
     from eha_ros.core.config.params import ParamError
     from eha_ros.core.io.live_params import decimation

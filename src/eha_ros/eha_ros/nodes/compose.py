@@ -24,6 +24,8 @@ import threading
 import time
 from collections import defaultdict
 
+from ..core.io import cdr
+
 
 def unlocked(method):
     """Mark a timer callback that must not hold up the loop: a composed process runs it without
@@ -77,6 +79,12 @@ class LocalPublisher:
         self.bus, self.topic, self.dds, self.latched = bus, topic, dds, latched
         self._remote = 0
         self._checked = -1.0
+        # to DDS as CDR bytes from one struct.pack (core.io.cdr): rclpy would first convert
+        # the whole message to C; a type cdr cannot lay out is published as the message
+        try:
+            self._encode = cdr.encoder(dds.msg_type)
+        except (cdr.Unsupported, AttributeError):       # not a message class
+            self._encode = None
 
     def remote_subscribers(self) -> int:
         now = time.monotonic()
@@ -92,7 +100,7 @@ class LocalPublisher:
             for callback in self.bus.subscribers.get(self.topic, ()):
                 callback(msg)
         if self.latched or self.remote_subscribers():
-            self.dds.publish(msg)
+            self.dds.publish(msg if self._encode is None else self._encode(msg))
 
     def get_subscription_count(self) -> int:
         """Co-located subscribers that want messages now + outside ones (the latter looked up
