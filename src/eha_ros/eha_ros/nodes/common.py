@@ -240,15 +240,17 @@ def channel_ok(node, msg, counters) -> bool:
     return False
 
 
-def publish_counted(node, pub, msg, what: str) -> None:
+def publish_counted(node, pub, msg, what: str, seq=None) -> None:
     """Publish from a loop thread; a failure (e.g. RCLError under DDS overload) is counted as
-    publish_errors (where the node keeps counters) and logged, so the loop goes on."""
+    publish_errors (where the node keeps counters) and logged ('publishing <what> <seq>
+    failed', the text made only then), so the loop goes on."""
     try:
         pub.publish(msg)
     except Exception as err:
         counters = getattr(node, 'c', None)
         if counters is not None:
             counters.bump('publish_errors')
+        what = what if seq is None else f'{what} {seq}'
         node.get_logger().error(f'publishing {what} failed: {err}', throttle_duration_sec=1.0)
 
 

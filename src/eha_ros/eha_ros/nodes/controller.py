@@ -267,7 +267,7 @@ class Controller(LifecycleNodeMixin):
         c.seq = int(seq)
         c.motor_speed_ref = float(speed)
         c.saturated = bool(saturated)
-        publish_counted(self, self.pub, c, f'command {seq}')
+        publish_counted(self, self.pub, c, 'command', seq)
         self.last_speed = speed
 
     def watchdog(self):

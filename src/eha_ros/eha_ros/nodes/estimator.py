@@ -61,7 +61,7 @@ class EstimatorNode:
             # a re-sent state (lock-step plant waiting for its command): the same answer
             # again, filter untouched, so lock-step runs stay deterministic
             self.c.bump('repeated_states')
-            publish_counted(self, self.pub, self.msg, f'estimate {msg.seq}')
+            publish_counted(self, self.pub, self.msg, 'estimate', msg.seq)
             return
         t0 = time.perf_counter()
         now = clock_s(self)
@@ -143,7 +143,7 @@ class EstimatorNode:
         m.stale, m.update_skipped = stale, r.update_skipped
         m.sensor_fault = int(r.sensor_fault)
         m.consistency = int(r.consistency)
-        publish_counted(self, self.pub, m, f'estimate {seq}')
+        publish_counted(self, self.pub, m, 'estimate', seq)
 
     @diag.reader
     def publish_diagnostics(self):

@@ -150,7 +150,7 @@ class Experiment:
         m.seq = estimate.seq
         m.motor_speed_ref = float(speed)
         m.saturated = abs(speed) >= self.run.limits.omega_max
-        publish_counted(self, self.pub_cmd, m, f'command {estimate.seq}')
+        publish_counted(self, self.pub_cmd, m, 'command', estimate.seq)
 
     def send(self, seq: int):
         """Reference (and load) of plant tick ``seq``: its seq, and the time it is meant for in
@@ -162,11 +162,11 @@ class Experiment:
         stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
         self.ref.header.stamp, self.ref.seq = stamp, int(seq)
         self.ref.position = r.reference_for(seq)
-        publish_counted(self, self.pub_ref, self.ref, f'reference {seq}')
+        publish_counted(self, self.pub_ref, self.ref, 'reference', seq)
         if self.pub_load is not None:
             self.load.header.stamp, self.load.seq = stamp, int(seq)
             self.load.force = r.load_for(seq)
-            publish_counted(self, self.pub_load, self.load, f'load {seq}')
+            publish_counted(self, self.pub_load, self.load, 'load', seq)
 
     def stopped(self, why: str):
         """A guard of the run stopped it: zero load, reference 0, say why, exit 1."""

@@ -518,7 +518,7 @@ class PlantSide(LifecycleNodeMixin):
         if self.lockstep:
             ns = int(round(self.k * self.Ts * 1e9))
             st = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-            publish_counted(self, self.pub_clock, Clock(clock=st), f'clock {self.k}')
+            publish_counted(self, self.pub_clock, Clock(clock=st), 'clock', self.k)
             return st
         ns = time.time_ns()                   # wall clock, cheaper than Clock.now()
         return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
@@ -529,7 +529,7 @@ class PlantSide(LifecycleNodeMixin):
         s.seq = self.k
         self.state_time = time.perf_counter()
         self.sent += 1
-        publish_counted(self, self.pub_state, s, f'state {self.k}')
+        publish_counted(self, self.pub_state, s, 'state', self.k)
         if self.pub_truth is None or not self.pub_truth.get_subscription_count():
             return                            # nobody listens: skip building the truth
         with self.hw_lock:
@@ -548,7 +548,7 @@ class PlantSide(LifecycleNodeMixin):
             speed[i] = tr.motor_speed[i]
             current[i] = tr.motor_current[i]
             valve[i] = tr.valve_fraction[i]
-        publish_counted(self, self.pub_truth, t, f'truth {self.k}')
+        publish_counted(self, self.pub_truth, t, 'truth', self.k)
 
     # ---- start-up and diagnostics (executor thread) ----
     def refuse_if_other_plant(self, wait: float):

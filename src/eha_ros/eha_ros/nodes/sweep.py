@@ -153,10 +153,10 @@ class Sweep:
         m = self.ref_msg
         m.seq = int(seq)
         m.position = float(position)
-        publish_counted(self, self.pub, m, f'reference {seq}')
+        publish_counted(self, self.pub, m, 'reference', seq)
         if self.pub_load is not None:
             self.load_msg.force = float(load)
-            publish_counted(self, self.pub_load, self.load_msg, f'load {seq}')
+            publish_counted(self, self.pub_load, self.load_msg, 'load', seq)
 
     def end(self, reason=None):
         """Finish the report; reference back to the offset; exit if asked to."""

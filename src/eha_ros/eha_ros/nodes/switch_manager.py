@@ -220,7 +220,7 @@ class SwitchManagerNode:
             m.drive_enable = [bool(b) for b in sel.drive_enable]
             m.valve_open = [bool(b) for b in sel.valve_open]
             m.bypass_open = bool(sel.bypass_open)
-            publish_counted(self, self.pub_select, m, f'channel_select {seq}')
+            publish_counted(self, self.pub_select, m, 'channel_select', seq)
             self.sent_select = sel
         if status != self.sent_status:
             self.publish_status(status, seq)
@@ -246,7 +246,7 @@ class SwitchManagerNode:
         m.seq = int(seq)
         m.active_channel, healthy, m.switch_count, m.state, m.reason = status
         m.channel_healthy = [bool(b) for b in healthy]
-        publish_counted(self, self.pub_status, m, f'redundancy status {seq}')
+        publish_counted(self, self.pub_status, m, 'redundancy status', seq)
         self.sent_status = status
 
     def on_status_timer(self):
