@@ -24,8 +24,9 @@ RAW = '\n'.join([
 
 
 def test_samples_are_charged_to_the_innermost_stage_and_scaled_per_tick():
-    b = P.breakdown(RAW, wall=0.5)          # 0.5 s at RATE: one sample = 2 us per tick
-    us = 1e6 / P.RATE / 0.5 / P.TICK_HZ
+    wall = 500 / P.RATE                     # 500 samples' time: one sample = 2 us per tick
+    b = P.breakdown(RAW, wall=wall)
+    us = 1e6 / P.RATE / wall / P.TICK_HZ
     assert us == pytest.approx(2.0)
     st = b['stages_us_per_tick']
     assert st == pytest.approx({'estimator (core)': 300 * us,
@@ -37,3 +38,19 @@ def test_samples_are_charged_to_the_innermost_stage_and_scaled_per_tick():
     assert sum(b['stage_share'].values()) == pytest.approx(1.0)
     own = b['stage_top_frames_us_per_tick']['message fields (generated classes)']
     assert list(own) == ['PlantSide.publish_state (eha_ros/nodes/plant_side.py:522)']
+
+
+def test_only_the_samples_of_one_thread():
+    b = P.breakdown(RAW, wall=1.0, only='PlantSide.realtime_loop ')
+    assert 'executor, timers (rclpy)' not in b['stages_us_per_tick']
+    assert b['stage_share']['estimator (core)'] == pytest.approx(300 / 490)
+
+
+def test_bench_tick_runs_the_composed_tick_back_to_back():
+    """scripts/bench tick's child: eha_loop's nodes, the plant side ticking back to back."""
+    from eha_ros.bench import tick
+    r = tick._run_child(1000)
+    print(r)
+    assert r['ticks'] == 1000
+    assert 0 < r['us_per_tick_best'] <= r['us_per_tick_median'] < 5000
+    assert r['cpu_us_per_tick'] > 0

@@ -2,8 +2,8 @@
 
 The composed stack runs (eha_loop hosting plant_sim, estimator, controller and switch_manager;
 nothing else listening) and py-spy samples the threads of eha_loop that hold the GIL
-(``--gil --nonblocking``: the loop is never paused) RATE times a second for the duration (default
-20 s). Each sample is charged to the innermost frame that names a stage (STAGES, first match in
+(``--gil --nonblocking``: the loop is never paused) RATE times a second (not a multiple of the
+loop's rate) for the duration (default 20 s). Each sample is charged to the innermost frame that names a stage (STAGES, first match in
 order, tried from the innermost frame out), so a message field set inside the plant side counts
 as message building, the estimator's kernel called from its node as the estimator. A stage's
 figure is its CPU in microseconds per tick: samples / RATE / wall s x 1e6 / ticks per s. Time in
@@ -26,7 +26,7 @@ import time
 
 from .stack import NODES, wait_running
 
-RATE = 1000                     # [Hz] py-spy samples
+RATE = 1237                     # [Hz] py-spy samples: not a multiple of the loop's 1 kHz
 TICK_HZ = 1000.0                # the loop's rate
 STAGES = (                      # (stage, pattern on 'function (file:line)'), innermost first
     ('DDS publish (rclpy)', r'\(rclpy/publisher\.py'),
@@ -60,14 +60,15 @@ def stage_of(frames: list[str]) -> str:
     return 'other'
 
 
-def breakdown(raw: str, wall: float) -> dict:
-    """Per-stage and per-line figures from py-spy's raw output (``frames count`` lines)."""
+def breakdown(raw: str, wall: float, only: str | None = None) -> dict:
+    """Per-stage and per-line figures from py-spy's raw output (``frames count`` lines);
+    ``only``: the samples whose stack holds this text (a thread's entry function)."""
     stages, lines = collections.Counter(), collections.Counter()
     by_stage = collections.defaultdict(collections.Counter)
     total = 0
     for row in raw.splitlines():
         stack, _, n = row.rpartition(' ')
-        if not stack or not n.isdigit():
+        if not stack or not n.isdigit() or (only is not None and only not in stack):
             continue
         frames, n = stack.split(';'), int(n)
         stage = stage_of(frames)
@@ -86,15 +87,22 @@ def breakdown(raw: str, wall: float) -> dict:
                 k: {f: v * us for f, v in by_stage[k].most_common(6)} for k in stages}}
 
 
+def py_spy() -> str:
+    """py-spy's path: the venv's own first (scripts/bench runs the venv's python without the
+    venv on PATH)."""
+    from ..core.config.cli import UsageError
+    spy = shutil.which('py-spy', path=os.path.dirname(sys.executable)) or shutil.which('py-spy')
+    if spy is None:
+        raise UsageError('bench: py-spy not found (pip install py-spy; it is in '
+                         'requirements.txt)')
+    return spy
+
+
 def profile(duration: float, log=print) -> dict:
     from ..core.config.cli import UsageError
     from ..monitor import DiagMonitor
     from ..stack import Stack, cpu_seconds
-    # the venv's own py-spy first: scripts/bench runs the venv's python without its PATH
-    spy = shutil.which('py-spy', path=os.path.dirname(sys.executable)) or shutil.which('py-spy')
-    if spy is None:
-        raise UsageError('bench profile: py-spy not found (pip install py-spy; it is in '
-                         'requirements.txt)')
+    spy = py_spy()
     monitor = DiagMonitor('bench_profile')
     with tempfile.TemporaryDirectory() as tmp:
         stack = Stack(NODES, composed=True, log_dir=os.path.join(tmp, 'logs')).start()
