@@ -3,9 +3,10 @@
 The composed stack runs (eha_loop hosting plant_sim, estimator, controller and switch_manager;
 nothing else listening) and py-spy samples the threads of eha_loop that hold the GIL
 (``--gil --nonblocking``: the loop is never paused) RATE times a second (not a multiple of the
-loop's rate) for the duration (default 20 s). Each sample is charged to the innermost frame that names a stage (STAGES, first match in
-order, tried from the innermost frame out), so a message field set inside the plant side counts
-as message building, the estimator's kernel called from its node as the estimator. A stage's
+loop's rate) for the duration (default 20 s). Each sample is charged to the innermost frame
+that names a stage (STAGES, first match in order, tried from the innermost frame out), so a
+message field set inside the plant side counts as message building, the estimator's kernel
+called from its node as the estimator. A stage's
 figure is its CPU in microseconds per tick: samples / RATE / wall s x 1e6 / ticks per s. Time in
 compiled code that releases the GIL (rclpy's C, numba kernels without the GIL) is not sampled:
 the total is set beside the process's CPU from /proc, the difference named.

@@ -6,7 +6,8 @@ Each kernel is compiled by running the code path that uses it, for a few ticks, 
 types the stack passes: the closed loop tick by tick (what each node's core object runs) and
 in compiled segments (campaigns, batch), with the switch manager, a commanded switch and a
 motor fault; the estimator's real-time branches (lost and stale states); the switch manager
-node's per-state kernel; the identification's replays. It prints how many kernels numba compiled (0 when the cache already held them all).
+node's per-state kernel; the identification's replays. It prints how many kernels numba
+compiled (0 when the cache already held them all).
 
 usage: python -m eha_ros.tools.warm_kernels [--quiet]
 """

@@ -103,7 +103,7 @@ WINDOW = 256          # commands kept for the speed-reference band (ManagerTick)
 @njit(cache=True)
 def band(seqs, refs, n, scan, oldest):
     """(count, lo, hi) of the references of the newest ``scan`` of the ``n`` commands in the
-    ring (seqs, refs; entry n - 1 % WINDOW the newest) whose seq is at least ``oldest``."""
+    ring (seqs, refs; entry (n - 1) % WINDOW the newest) whose seq is at least ``oldest``."""
     lo, hi, count = math.inf, -math.inf, 0
     for j in range(min(scan, n, WINDOW)):
         i = (n - 1 - j) % WINDOW
