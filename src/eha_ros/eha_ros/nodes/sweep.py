@@ -76,6 +76,7 @@ class Sweep:
         self.loop = LoopStats(plan.Ts)
         self.ready_since = None
         self.commands_seen = 0
+        self.newest = -1                   # newest seq of an estimate, command or truth
         self.plant_active = True           # eha/plant_state; not heard: taken as active
         self.done = False
         self.exit_code = 0
@@ -105,14 +106,17 @@ class Sweep:
 
     def on_command(self, msg):
         self.commands_seen += 1
+        self.newest = max(self.newest, msg.seq)
         self.session.record('command', msg.seq, msg.motor_speed_ref)
 
     def on_truth(self, msg):
+        self.newest = max(self.newest, msg.seq)
         self.session.record('truth', msg.seq, msg.position)
         self.session.record('load', msg.seq, msg.load_force)
         self.session.record('sensor_offset', msg.seq, msg.position_sensor_offset)
 
     def on_estimate(self, msg):
+        self.newest = max(self.newest, msg.seq)
         self.session.record('estimate', msg.seq, msg.position)
         if self.session.check_error(msg.seq, msg.position):
             self.get_logger().error(f'sweep {self.session.aborted}; reference back to the '
@@ -136,8 +140,12 @@ class Sweep:
             if now - self.ready_since < self.p['sweep.start_delay']:
                 self.send(k + self.lead, s.reference_for(k + self.lead))
                 return
-            s.start(k + self.lead)
-            self.get_logger().info(f'sweep started at tick {k + self.lead}')
+            # after every tick already seen on any stream: a state handled late (its queue
+            # behind the others') must not start the plan on ticks whose estimates, commands
+            # or truth were already handled, and dropped, before the start (CI: 610 ticks)
+            start = max(k, self.newest) + self.lead
+            s.start(start)
+            self.get_logger().info(f'sweep started at tick {start}')
         s.record('measured', k, msg.position)
         s.record('motor_speed_0', k, msg.motor_speed[0])
         s.record('motor_speed_1', k, msg.motor_speed[1])
