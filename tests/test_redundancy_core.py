@@ -403,7 +403,7 @@ def test_manager_tick_equals_the_python_state_machine(params):
     kinds = collections.Counter()
     for run in range(24):
         py, fast = SwitchManager(params), SwitchManager(params)
-        tick = RS.ManagerTick(fast, max_age=50, scan=108)
+        tick = RS.ManagerTick(fast, max_age=50)
         refs = collections.deque(maxlen=256)
         k, ref = 0, 100.0
         while k < 3000:

@@ -46,8 +46,7 @@ class SwitchManagerNode:
         self.fresh_since, self.armed = None, False
         self.mgr = SwitchManager(p)
         # per state, compiled; every change of the manager goes through it
-        self.tick = RS.ManagerTick(self.mgr, self.max_cmd_age_ticks,
-                                min(RS.WINDOW, 2 * self.max_cmd_age_ticks + 8))
+        self.tick = RS.ManagerTick(self.mgr, self.max_cmd_age_ticks)
         self.log = EventLog(p['switch.node.log_dir'])
         self.lock = threading.Lock()
         self.c = Counters()

@@ -49,7 +49,7 @@ def _switch_manager_node() -> None:
     from ..core.redundancy.params import SCHEMA
     from ..core.redundancy.stepper import ManagerTick
     from ..core.sim.batch import node_params
-    tick = ManagerTick(SwitchManager(node_params('switch_manager', SCHEMA)), 50, 108)
+    tick = ManagerTick(SwitchManager(node_params('switch_manager', SCHEMA)), 50)
     for k in range(5):
         tick.command(k, 0.0)
         tick.update(k * 1e-3, k, 0.0, True, np.zeros(2), np.zeros(2), 1e6, 1e6,

@@ -144,12 +144,13 @@ class ManagerTick:
     The drives may be applying any of the references of the last ``max_age`` ticks (which
     command a drive applies now is unknown, DDS latency): :meth:`command` keeps the recent
     ones, the speed monitor measures from the range of those at most ``max_age`` older than
-    the state (among the newest ``scan``: commands come once per tick)."""
+    the state (among the newest ``2 max_age + 8``, at most WINDOW: commands come once per
+    tick)."""
 
-    def __init__(self, mgr, max_age: int, scan: int):
+    def __init__(self, mgr, max_age: int):
         self.mgr = mgr
         self.a = pack(mgr)
-        self.max_age, self.scan = max_age, scan
+        self.max_age, self.scan = max_age, min(WINDOW, 2 * max_age + 8)
         self.seqs, self.refs, self.n = np.zeros(WINDOW, np.int64), np.zeros(WINDOW), 0
         self.keep_ms, self.keep_hs = np.empty_like(self.a.ms), np.empty_like(self.a.hs)
         self.reported, self.fault = np.zeros(2, np.bool_), np.zeros(2, np.bool_)
