@@ -314,11 +314,14 @@ def _release(st, pid):
         st.proc.kill()
 
 
-def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path):
+def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path, ros_node):
     """Issue 21 item 12: in real time the recording starts with the loop (the plant's start
-    gate waits for the recorder: state seq 1 is in the file); a SIGKILLed recorder is
-    reported (node exited, rc 1), its unfinished file is recovered into one the standard mcap
-    reader opens, losing at most the chunk being filled (256 KiB, well under a second)."""
+    gate waits for the recorder: state seq 1 is in the file); a SIGKILLed recorder -- in real
+    time a guest of eha_loop, so the loop's process -- is reported (node exited, rc 1), its
+    unfinished file is recovered into one the standard mcap reader opens, losing at most the
+    chunk being filled (256 KiB, well under a second). Issue 46: the guest takes the loop's
+    topics in-process (no recorder process, no recorder subscription on the DDS graph) and
+    records every state, estimate and command, in order, with no gap."""
     import time
     from mcap.reader import make_reader
     from eha_ros.core.io.recording import read
@@ -326,7 +329,9 @@ def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path):
     try:
         assert st.running(), st.lines
         time.sleep(4.0)
-        pid = _child(st, 'recorder')
+        on_graph = {t: {i.node_name for i in ros_node.get_subscriptions_info_by_topic(t)}
+                    for t in ('/eha/state', '/eha/estimate', '/eha/command', '/diagnostics')}
+        pid = _child(st, 'eha_loop')
         assert pid, st.lines
         os.kill(pid, signal.SIGKILL)
         t_kill = time.time_ns()
@@ -335,17 +340,30 @@ def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path):
         if st.proc.poll() is None:
             st.proc.kill()
     text = ''.join(st.lines)
-    assert 'stopped (node exited: recorder (-9))' in text, text
+    assert 'stopped (node exited: eha_loop (-9))' in text, text
     assert 'recovered' in text and 'into a finished file' in text, text
+    assert set(st.summary()['processes']) == {'eha_loop'}
+    assert ',recorder ' in st.summary()['processes']['eha_loop']
+    log = (st.folder / 'logs' / 'eha_loop.log').read_text()
+    assert 'start gate: recorder subscribed to every /eha/* topic' in log, log[-3000:]
+    assert 'going on anyway' not in log, log[-3000:]       # the co-located guest counted
+    # in-process: the loop topics have no recorder on the graph; /diagnostics (DDS) has
+    assert all('recorder' not in nodes for t, nodes in on_graph.items()
+               if t != '/diagnostics'), on_graph
+    assert 'recorder' in on_graph['/diagnostics'], on_graph
     with open(st.folder / 'recording.mcap', 'rb') as fh:
         stats = make_reader(fh).get_summary().statistics
     assert stats.message_count > 1000
-    states = read(str(st.folder / 'recording.mcap'), ['/eha/state'])['/eha/state']
-    seqs = [m.seq for _, m in states]
+    rec = read(str(st.folder / 'recording.mcap'), ['/eha/state', '/eha/estimate',
+                                                   '/eha/command'])
+    states = rec['/eha/state']
     lost = (t_kill - states[-1][0]) * 1e-9
-    print(f'recording: first state seq {min(seqs)}, {len(seqs)} states, the kill lost '
+    print(f'recording: first state seq {states[0][1].seq}, {len(states)} states, the kill lost '
           f'{lost:.2f} s of the streams; {stats.message_count} messages after recovery')
-    assert min(seqs) <= 1, min(seqs)            # from the loop's first tick
+    for topic, msgs in rec.items():
+        seqs = [m.seq for _, m in msgs]
+        assert seqs[0] <= 1, (topic, seqs[0])       # from the loop's first tick
+        assert seqs == list(range(seqs[0], seqs[-1] + 1)), topic   # in order, no gap
     assert 0.0 <= lost < 1.0, lost
     assert st.summary()['recording_recovered']['messages'] == stats.message_count
 

@@ -99,7 +99,9 @@ class Stack:
     composed=True runs the loop nodes among ``nodes`` (LOOP_NODES) as one eha_loop process
     (in-process topics between them; real time only), listed as 'eha_loop' in procs.
     ``record='path.mcap'`` adds the recorder (every /eha topic and /diagnostics): it starts
-    first and stops last, after the other nodes have exited, so their last messages are in.
+    first and stops last, after the other nodes have exited, so their last messages are in;
+    composed, it is a guest of eha_loop (the loop topics in-process, none over DDS for it),
+    and eha_loop stops last.
     ``live=PORT`` adds the live node (the same topics over the Foxglove WebSocket protocol on
     that port, 0: any free one): composed, inside eha_loop (it takes the loop topics
     in-process), else as its own process."""
@@ -115,6 +117,8 @@ class Stack:
         self.composed = [n for n in self.nodes if n in LOOP_NODES] if composed else []
         if self.composed and live is not None and 'live' not in self.nodes:
             self.composed.append('live')
+        if self.composed and record and 'recorder' not in self.nodes:
+            self.composed.append('recorder')     # a guest: the loop topics in-process
         self.record = record
         self.live = live
         self.config_dir = config_dir
@@ -150,7 +154,7 @@ class Stack:
             cmds['ads_peer'] = [sys.executable, '-m', 'eha_ros.tools.ads_peer'] + \
                 (['--config', self.config_dir] if self.config_dir else []) + \
                 (['--lockstep'] if self.lockstep else [])
-        if self.record and 'recorder' not in self.nodes:
+        if self.record and 'recorder' not in self.nodes + self.composed:
             cmds['recorder'] = node_command('recorder', self.config_dir,
                                             self.extra.get('recorder', ()))
         if self.live is not None and 'live' not in self.nodes + self.composed:
@@ -183,16 +187,19 @@ class Stack:
         return {n: p.returncode for n, p in self.procs.items() if p.poll() is not None}
 
     def stop(self, timeout: float = 10.0) -> dict:
-        """SIGINT all (the recorder last), wait, SIGKILL stragglers; returns
-        {name: (returncode, stderr)}."""
+        """SIGINT all (the recorder's process last: eha_loop when it hosts the recorder),
+        wait, SIGKILL stragglers; returns {name: (returncode, stderr)}."""
         end = time.monotonic() + timeout
-        nodes = {n: p for n, p in self.procs.items() if n != 'recorder'}
+        last = self.process_of('recorder') if self.record else None
+        nodes = {n: p for n, p in self.procs.items() if n != last}
         out = self._stop_group(nodes, end)
-        if 'recorder' in self.procs:       # after the others: their last messages are recorded
-            out.update(self._stop_group({'recorder': self.procs['recorder']},
+        if last in self.procs:             # after the others: their last messages are recorded
+            out.update(self._stop_group({last: self.procs[last]},
                                         max(end, time.monotonic() + 5.0)))
-            if out['recorder'][0] != 0 and self.record and os.path.exists(self.record):
-                self.recovered = self._recover()
+            if out[last][0] != 0 and os.path.exists(self.record):
+                from .core.io.recording import finished
+                if not finished(self.record):    # eha_loop may end 1 for another reason
+                    self.recovered = self._recover()
         for log in self._logs:
             log.close()
         return out

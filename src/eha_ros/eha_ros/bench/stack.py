@@ -33,7 +33,8 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
     """Start the stack, wait for the loop to run, measure over ``duration`` s. ``live``: with
     the live node, first ``duration`` s without a viewer (cpu_*_cores_no_viewer), then with
     one WebSocket client subscribed to every channel (bench live). ``record``: with the
-    recorder (every /eha topic and /diagnostics into a temporary MCAP file)."""
+    recorder (every /eha topic and /diagnostics into a temporary MCAP file; composed: a guest
+    of eha_loop): recorded_states, recorded_state_gaps of the whole run."""
     from ..monitor import CpuMeter, DiagMonitor
     from ..stack import Stack
     monitor = DiagMonitor('bench_stack')
@@ -64,6 +65,7 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
             viewer.close()
         stack.stop()
         monitor.close()
+        recorded = _recorded(stack.record) if tmp else {}
         if tmp:
             tmp.cleanup()
     ticks = d1.get('ticks', 0) - d0.get('ticks', 0)
@@ -79,6 +81,7 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
            'overruns': d1.get('overruns', 0) - d0.get('overruns', 0),
            'cpu_total_cores': sum(share.values())}
     out.update({f'cpu_{n}_cores': c for n, c in share.items()})
+    out.update(recorded)
     out.update({f'cpu_{n}_cores_no_viewer': c for n, c in idle.items()})
     if viewer:
         out['viewer_channels'] = len(viewer.client.subs)
@@ -89,6 +92,17 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
             if key in values:
                 out[f'{node}_{key}'] = values[key]
     return out
+
+
+def _recorded(path: str) -> dict:
+    """The whole run's recording: states in it and seq values missing between its first and
+    last (the recorder keeps up: none)."""
+    from ..core.io.recording import RecordingError, seq_coverage
+    try:
+        n, gaps = seq_coverage(path, T.STATE.path)
+    except RecordingError:
+        return {'recorded_states': 0, 'recorded_state_gaps': -1}
+    return {'recorded_states': n, 'recorded_state_gaps': gaps}
 
 
 def wait_running(stack, monitor, timeout: float = 90.0) -> None:

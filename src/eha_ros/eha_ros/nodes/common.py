@@ -160,6 +160,7 @@ def dds_transport():
 
     class EhaNode(Node):
         callback_lock = contextlib.nullcontext()
+        composed_bus = None          # eha_loop's nodes: their in-process Bus
     return EhaNode
 
 
@@ -356,7 +357,9 @@ class StartGate:
     matched each of those publishers (its report on ``<name>/matched``, :class:`MatchReport`,
     in the gated node's namespace: the graph shows a subscription before DDS has matched it to
     every publisher, and the messages in between are lost to a recorder), and each of the
-    node's ``own`` publishers has matched every subscription the graph shows on its topic;
+    node's ``own`` publishers has matched every subscription the graph shows on its topic
+    (a named node co-located in eha_loop takes a topic published there in-process: its report
+    naming the topic is enough);
     seen for ``settle`` s in a row, or until ``timeout`` s of wall time after start-up (then a
     warning names what was missing)."""
 
@@ -381,6 +384,8 @@ class StartGate:
 
     def missing(self) -> list[str]:
         n = self.node
+        bus = getattr(n, 'composed_bus', None)
+        here, local = (bus.names, bus.published) if bus is not None else ((), ())
         out = []
         for topic, _ in n.get_topic_names_and_types():
             if not topic.startswith(self.prefix):
@@ -391,7 +396,10 @@ class StartGate:
             subs = {i.node_name for i in n.get_subscriptions_info_by_topic(topic)}
             for name in self.names:
                 matched = self.reports[name].get(topic, 0)
-                if name not in subs:
+                if name in here and topic in local:     # in-process: not on the graph
+                    if topic not in self.reports[name]:
+                        out.append(f'{name} on {topic}')
+                elif name not in subs:
                     out.append(f'{name} on {topic}')
                 elif matched < publishers:
                     out.append(f'{name} matching {topic} ({matched} of {publishers} '

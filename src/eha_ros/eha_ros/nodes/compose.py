@@ -46,6 +46,7 @@ class Bus:
         self.deferred: list = []             # DDS subscriptions decided at finalize()
         self.guests: set[str] = set()        # nodes without the process's global ROS args
         self.latched: dict[str, object] = {}  # topic -> last message of a latched publisher
+        self.names: set[str] = set()         # the co-located nodes
         self.final = False
 
     def guard(self, callback):
@@ -62,14 +63,22 @@ class Bus:
 
     def finalize(self):
         """Create DDS subscriptions for the topics no co-located node publishes."""
-        for node, topic, args, kwargs in self.deferred:
+        for node, topic, args, kwargs, handle in self.deferred:
             if topic not in self.published:
-                node.dds_subscription(topic, *args, **kwargs)
+                handle.dds = node.dds_subscription(topic, *args, **kwargs)
         self.deferred.clear()
         self.final = True
 
     def local_topics(self) -> list[str]:
         return sorted(t for t in self.published if self.subscribers.get(t))
+
+
+class Subscription:
+    """What a composed node's create_subscription returns before :meth:`Bus.finalize`:
+    ``dds`` is the DDS subscription once finalize made one (the topic has no co-located
+    publisher), else None (in-process deliveries only)."""
+
+    dds = None
 
 
 class LocalPublisher:
@@ -129,11 +138,13 @@ def composed_base(bus: Bus):
 
     class ComposedNode(Node):
         callback_lock = bus.lock
+        composed_bus = bus
 
         def __init__(self, node_name, *args, **kwargs):
             if node_name in bus.guests:      # its parameters come from its own sections only
                 kwargs.setdefault('use_global_arguments', False)
             super().__init__(node_name, *args, **kwargs)
+            bus.names.add(self.get_name())
 
         def create_publisher(self, msg_type, topic, qos_profile, **kwargs):
             dds = super().create_publisher(msg_type, topic, qos_profile, **kwargs)
@@ -155,8 +166,9 @@ def composed_base(bus: Bus):
                 if name not in bus.published:
                     return self.dds_subscription(name, msg_type, guarded, qos_profile, **kwargs)
                 return None
-            bus.deferred.append((self, name, (msg_type, guarded, qos_profile), kwargs))
-            return None
+            handle = Subscription()
+            bus.deferred.append((self, name, (msg_type, guarded, qos_profile), kwargs, handle))
+            return handle
 
         def dds_subscription(self, topic, msg_type, callback, qos_profile, **kwargs):
             return super().create_subscription(msg_type, topic, callback, qos_profile, **kwargs)

@@ -7,7 +7,9 @@ Each node is the same class as its standalone executable, with its own name, par
 delivered in-process, in the plant's (or bridge's) loop thread, so state(k) -> estimate(k)
 -> command(k) completes within the tick. Everything else on the graph (sweep, recorder,
 monitors, tests) sees the usual topics over DDS. ``--nodes ...,live`` adds the live view as a
-guest: it takes the loop topics in-process and only its own params sections (no /**).
+guest: it takes the loop topics in-process and only its own params sections (no /**);
+``--nodes ...,recorder`` the recorder likewise (what run_stack --record does in real time): the
+loop's topics are then recorded without a DDS publish.
 ``--nodes ...,experiment`` hosts the experiment node (core.config.registry LOOP_TOOLS: it
 answers the loop's ticks) with the loop nodes' parameters; when it ends itself, the process
 ends (the plant side writes zero speed as it stops).

@@ -30,9 +30,7 @@ import time
 
 import foxglove
 from rclpy.clock import Clock, ClockType
-from rclpy.serialization import serialize_message
 
-from ..core.io import cdr
 from ..core.io.live_params import (SCHEMA, allow_patterns, decimation, exposure, is_loopback,
                                    served_topics, service_offered)
 from ..core.io.mcap_sink import stamp_ns
@@ -41,7 +39,7 @@ from ..core.io.ws_subprotocol import SubprotocolRelay
 from . import diag, msgdefs
 from .compose import unlocked
 from .common import declare_and_validate, factory, run
-from .tap import TopicTap
+from .tap import TopicTap, encoder
 
 
 def to_dict(msg):
@@ -184,7 +182,7 @@ class Live:
         counts, queue, at_once = self.received, self.queue, not self.flush
         backlog = self.p['live.backlog']
         entry = (topic, ch.log, stamped)
-        encode = self.encoder(type_name)
+        encode = encoder(type_name)
 
         @unlocked                    # in eha_loop: touches nothing the loop shares
         def on_message(data):
@@ -204,15 +202,6 @@ class Live:
                 self.flush_queue()
         on_message.eha_wanted = has_sinks     # eha_loop: nothing built for no viewer
         return on_message
-
-    @staticmethod
-    def encoder(type_name):
-        """msg -> CDR bytes: core.io.cdr's one struct.pack where the type has a fixed layout
-        (every eha_msgs type), else serialize_message."""
-        try:
-            return cdr.encoder(msgdefs.message_class(type_name))
-        except (cdr.Unsupported, ValueError):
-            return serialize_message
 
     def flush_queue(self):
         """Hand the queued messages to the server. log time = the header stamp, else the

@@ -1,7 +1,9 @@
 """recorder node: every topic under /eha (plus /diagnostics) into one MCAP file.
 
 Topics are discovered periodically (wall-time timer, nodes.tap: raw CDR with the publishers'
-QoS), so topics that appear later are caught.
+QoS), so topics that appear later are caught. As a guest of eha_loop (``--nodes ...,recorder``,
+what run_stack --record does in real time) the loop's topics arrive in-process as message
+objects, encoded here (core.io.cdr), and nothing is published over DDS for the recorder's sake.
 Messages go to a writer thread (core.io.mcap_sink) with log_time = receive time (wall clock) and
 publish_time = header stamp. On SIGINT/SIGTERM the queues are drained and the file finished;
 message counts per topic go to /diagnostics and to the log. For the plant side: what DDS has
@@ -18,7 +20,8 @@ from ..core.io.mcap_sink import McapSink
 from ..core.io.recorder_params import SCHEMA
 from . import diag
 from .common import MatchReport, ReceivedReport, declare_and_validate, factory, run
-from .tap import TopicTap, qos_yaml
+from .compose import unlocked
+from .tap import TopicTap, encoder, qos_yaml
 
 
 def default_output() -> str:
@@ -48,12 +51,14 @@ class Recorder:
         self.tap = TopicTap(self, p['recorder.namespace'], extra, p['recorder.depth'],
                             self.open_topic, 'recording')
         self.matched = MatchReport(self)     # what the plant side's start gate waits for
-        self.received = ReceivedReport(self, self.counts)   # what a lock-step plant paces on
+        if getattr(self, 'composed_bus', None) is None:   # what a lock-step plant paces on
+            self.received = ReceivedReport(self, self.counts)
         self.create_timer(p['recorder.discovery_period'], self.discover, clock=wall)
         self.get_logger().info(f'recorder: {self.tap.ns}/*{" + " if extra else ""}'
                                f'{", ".join(sorted(extra))} -> {self.output}')
         self.discover()
 
+    @unlocked                    # graph queries must not hold up a composed loop
     def discover(self):
         self.tap.discover()
         self.matched.update(self.tap.matched())
@@ -61,8 +66,14 @@ class Recorder:
     def open_topic(self, topic, type_name, definition, stamped, ends, offered):
         meta = {'offered_qos_profiles': qos_yaml(ends) if offered else ''}
         cid = self.sink.add_topic(topic, type_name, definition, stamped, meta)
-        put, now = self.sink.put, time.time_ns
-        return lambda data: put(cid, now(), data)
+        put, now, encode = self.sink.put, time.time_ns, encoder(type_name)
+
+        @unlocked                # touches only the sink's queue
+        def on_message(data):
+            """CDR bytes from DDS, or in eha_loop the message object (its publisher may reuse
+            it: encoded now)."""
+            put(cid, now(), data if isinstance(data, bytes) else encode(data))
+        return on_message
 
     def on_write_error(self, text: str):
         """Writer thread, once: the recording stopped (disk full): say so now."""
@@ -72,6 +83,7 @@ class Recorder:
     def counts(self) -> dict:
         return {self.sink.topics[c]: self.sink.received[c] for c in self.sink.topics}
 
+    @diag.reader
     def publish_diagnostics(self, final: bool = False):
         counts = self.counts()
         values = {'output': self.output, 'topics': len(counts),

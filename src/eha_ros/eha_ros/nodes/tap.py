@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from ..core.io import cdr
 from . import msgdefs
 
 
@@ -35,6 +36,23 @@ def qos_yaml(publishers) -> str:
         lines += [f'- history: {int(q.history)}', f'  depth: {int(q.depth)}',
                   f'  reliability: {int(q.reliability)}', f'  durability: {int(q.durability)}']
     return '\n'.join(lines)
+
+
+def dds_of(sub):
+    """The DDS subscription behind what create_subscription returned (eha_loop: None or a
+    nodes.compose.Subscription, whose ``dds`` is None for a topic delivered in-process)."""
+    return getattr(sub, 'dds', sub)
+
+
+def encoder(type_name: str):
+    """msg -> CDR bytes, for a message delivered in-process (eha_loop) as the object: core.io.cdr's
+    one struct.pack where the type has a fixed layout (every eha_msgs type), else
+    serialize_message."""
+    try:
+        return cdr.encoder(msgdefs.message_class(type_name))
+    except (cdr.Unsupported, ValueError):
+        from rclpy.serialization import serialize_message
+        return serialize_message
 
 
 class TopicTap:
@@ -122,14 +140,21 @@ class TopicTap:
 
     def matched(self) -> dict:
         """{topic: publishers DDS has matched to our subscription} (the graph can show a
-        publisher before it is matched; its messages until then are not seen)."""
-        return {topic: sub.get_publisher_count() for topic, (sub, _, _) in self.subs.items()}
+        publisher before it is matched; its messages until then are not seen). In eha_loop a
+        topic published in the process is delivered in-process: its publishers on the graph."""
+        out = {}
+        for topic, (sub, _, _) in self.subs.items():
+            dds = dds_of(sub)
+            out[topic] = self.node.count_publishers(topic) if dds is None else \
+                dds.get_publisher_count()
+        return out
 
     def drain(self) -> int:
         """Hand what DDS still holds to the callbacks (the executor has stopped spinning)."""
         n = 0
         for sub, callback, _ in self.subs.values():
-            while True:
+            sub = dds_of(sub)
+            while sub is not None:
                 try:
                     with sub.handle:
                         got = sub.handle.take_message(sub.msg_type, sub.raw)

@@ -25,6 +25,8 @@ class NodeInfo:
     ``joins_loop``: a tool that eha_loop hosts in real time with the loop nodes' parameters
     (plant.yaml's /** included): it answers the loop's ticks, which from a process of its own
     come too late for a 1 ms tick.
+    ``guest``: a tool that may also join the loop's process as a guest (its own params
+    sections only), taking the loop topics in-process (the recorder, in a composed run).
     """
 
     name: str
@@ -33,6 +35,7 @@ class NodeInfo:
     schema: tuple | None = None
     loop_prefix: str | None = None
     joins_loop: bool = False
+    guest: bool = False
 
     @property
     def executable(self) -> str:
@@ -58,14 +61,15 @@ _NODES = (
     NodeInfo('sweep', TOOL, ('plant.yaml', 'sweep.yaml'), ('eha_ros.core.sweep.params', 'SCHEMA')),
     NodeInfo('experiment', TOOL, ('plant.yaml', 'experiment.yaml'),
              ('eha_ros.core.ident.params', 'SCHEMA'), joins_loop=True),
-    NodeInfo('recorder', TOOL, ('recorder.yaml',), ('eha_ros.core.io.recorder_params', 'SCHEMA')),
+    NodeInfo('recorder', TOOL, ('recorder.yaml',), ('eha_ros.core.io.recorder_params', 'SCHEMA'),
+             guest=True),
     NodeInfo('eha_loop', CONTAINER),
 )
 NODES = {n.name: n for n in _NODES}
 
 PLANT_NODES = tuple(n.name for n in _NODES if n.role == PLANT)
 LOOP_NODES = tuple(n.name for n in _NODES if n.role == LOOP)
-GUESTS = tuple(n.name for n in _NODES if n.role == GUEST)
+GUESTS = tuple(n.name for n in _NODES if n.role == GUEST or n.guest)
 LOOP_TOOLS = tuple(n.name for n in _NODES if n.joins_loop)
 # a node name -> its files in config/
 NODE_FILES = {n.name: list(n.files) for n in _NODES if n.files}

@@ -103,6 +103,15 @@ def read_records(path: str, topics: Iterable[str] | None = None) -> dict[str, li
     return dict(out)
 
 
+def finished(path: str) -> bool:
+    """The recording has its summary (its recorder closed it)."""
+    try:
+        summary(path)
+    except RecordingError:
+        return False
+    return True
+
+
 def recover(path: str) -> dict:
     """Rewrite an unfinished recording (its recorder killed: no summary, maybe a cut last
     chunk) as a finished one that any MCAP reader opens, with every message up to the last
