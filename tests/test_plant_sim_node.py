@@ -129,6 +129,75 @@ def test_state_stream_at_1khz(probe):
     assert len(probe.truths) > 0 and all(t.seq > 0 for t in probe.truths[-10:])
 
 
+def _fifo_allowed() -> bool:
+    """This machine lets a thread take SCHED_FIFO 50 (tried in a thread of its own)."""
+    import os
+    import threading
+    got = []
+
+    def attempt():
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+            got.append(True)
+        except OSError:
+            got.append(False)
+    t = threading.Thread(target=attempt)
+    t.start()
+    t.join()
+    return got[0]
+
+
+def test_loop_thread_runs_at_its_realtime_priority(probe):
+    """Issue 46 (overruns under load): the real-time loop thread takes SCHED_FIFO at
+    sim_node.thread_priority (default 50) where the OS allows it, and says so on
+    /diagnostics; elsewhere 0 (normal scheduling, warned once)."""
+    probe.wait(lambda: probe.diagnostics.latest('plant_sim: loop') is not None, 10,
+               'no loop diagnostics')
+    loop = probe.diagnostics.latest('plant_sim: loop').values
+    assert str(loop['thread_priority']) == ('50' if _fifo_allowed() else '0'), loop
+
+
+def test_realtime_priority_granted_refused_or_off(monkeypatch):
+    """nodes.common.realtime_priority: the calling thread only (another keeps its policy);
+    0 leaves it alone; refused by the OS: 0 and one warning naming the way out."""
+    import os
+    import threading
+    from eha_ros.nodes.common import realtime_priority
+
+    class Log:
+        def __init__(self):
+            self.lines = []
+
+        def info(self, text):
+            self.lines.append(('info', text))
+
+        def warning(self, text):
+            self.lines.append(('warning', text))
+    out = {}
+
+    def in_thread(prio):
+        log = Log()
+        out[prio] = (realtime_priority(prio, log), os.sched_getscheduler(0), log.lines)
+    for prio in (0, 50):
+        t = threading.Thread(target=in_thread, args=(prio,))
+        t.start()
+        t.join()
+    assert out[0] == (0, os.SCHED_OTHER, [])
+    if _fifo_allowed():
+        assert out[50][:2] == (50, os.SCHED_FIFO)
+        assert out[50][2] == [('info', 'loop thread: SCHED_FIFO priority 50')]
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER          # this thread untouched
+
+    def refuse(*_):
+        raise PermissionError(1, 'Operation not permitted')
+    monkeypatch.setattr(os, 'sched_setscheduler', refuse)
+    log = Log()
+    assert realtime_priority(50, log) == 0
+    assert len(log.lines) == 1 and log.lines[0][0] == 'warning'
+    assert 'refused (Operation not permitted)' in log.lines[0][1] and 'ulimit -r 50' in \
+        log.lines[0][1]
+
+
 def test_plant_state_is_active_for_a_late_subscriber(probe, ros_node):
     """/eha/plant_state (latched): a subscriber that joins while the plant runs gets ACTIVE
     (the simulation applies every command; the controller rests only on INACTIVE)."""

@@ -140,6 +140,25 @@ def rcl_message(err: Exception) -> str:
     return re.sub(r', at /\S+:\d+', '', text).strip()
 
 
+def realtime_priority(priority: int, log) -> int:
+    """Put the calling thread under SCHED_FIFO at ``priority`` (1-99; ros2_control's
+    thread_priority): other work on the machine then cannot delay its wake-up. 0 leaves it as
+    it is. Refused by the OS (no CAP_SYS_NICE, RLIMIT_RTPRIO below it): said once, normal
+    scheduling. Returns the priority in effect (0: normal)."""
+    if priority <= 0:
+        return 0
+    import os
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as err:
+        log.warning(f'loop thread: SCHED_FIFO priority {priority} refused '
+                    f'({getattr(err, "strerror", None) or err}): normal scheduling (allow it '
+                    f'with CAP_SYS_NICE or "ulimit -r {priority}", or set thread_priority 0)')
+        return 0
+    log.info(f'loop thread: SCHED_FIFO priority {priority}')
+    return priority
+
+
 def make_executor():
     """EventsExecutor: about a third of the default executor's CPU at 1 kHz (ROS2_WHEELS.md)."""
     try:

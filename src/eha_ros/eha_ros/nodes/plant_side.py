@@ -43,7 +43,7 @@ from ..core.config.params import ParamError, Schema
 from ..core.stats import Counters, Histogram, RingStats
 from . import diag
 from .common import (Pace, PlantState, StartGate, bind, channel_ok, declare_and_validate,
-                     publish_counted, qos_of)
+                     publish_counted, qos_of, realtime_priority)
 from .compose import unlocked
 from .managed import state_label, transition
 from ..core import topics as T
@@ -82,6 +82,7 @@ class PlantSide(LifecycleNodeMixin):
         self.p = p = declare_and_validate(self, program.schema, params)
         q = program.prefix + '.'
         self.q = q
+        self.priority = 0                     # the loop thread's SCHED_FIFO priority in effect
         self.c = Counters()
         self.hw = program.hardware(p, self.c)
         self.Ts = p['plant.sim.Ts']
@@ -389,6 +390,7 @@ class PlantSide(LifecycleNodeMixin):
         return True
 
     def realtime_loop(self):
+        self.priority = realtime_priority(self.p[self.q + 'thread_priority'], self.get_logger())
         while self.running and not self.start_gate.poll():
             time.sleep(0.02)                  # StartGate: a recorder first
         period_ns = int(round(self.Ts * 1e9))
@@ -604,6 +606,7 @@ class PlantSide(LifecycleNodeMixin):
                   'link_fault_latched': g.link_fault, 'link_fault_reason': g.link_fault_reason,
                   'last_error': self.hw.last_error, 'conflict': self.conflict,
                   'transition_refused': self.transition_note}
+        values['thread_priority'] = self.priority
         values.update(self.hw.values(now))
         values.update(self.c)
         if self.pace is not None:

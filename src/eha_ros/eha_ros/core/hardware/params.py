@@ -48,4 +48,9 @@ def loop_params(prefix: str, *, command_timeout: float, autostart: str,
                   '(plant_sim 1e5: none)'),
         Param(f'{prefix}.diagnostics_period', 'float', 's', 1.0, 0.05, 60.0,
               doc='/diagnostics period'),
+        Param(f'{prefix}.thread_priority', 'int', '', 50, 0, 99,
+              doc='real time: SCHED_FIFO priority of the loop thread (ros2_control\'s '
+                  'thread_priority), so other work on the machine cannot delay a tick; 0 = '
+                  'normal scheduling; refused by the OS (no CAP_SYS_NICE or ulimit -r): '
+                  'warned once, normal scheduling'),
     ]
