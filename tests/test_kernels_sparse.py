@@ -1,5 +1,6 @@
 """The Kalman kernels' structured products (core.estimator.kernels.sandwich): the same bits as
-the dense products they replace, on matrices shaped like the estimator's."""
+the dense products they replace, on matrices shaped like the estimator's and on random sparse
+ones."""
 import numpy as np
 import pytest
 from numba import njit
@@ -97,3 +98,25 @@ def test_joseph_update_is_the_dense_one_to_the_bit(n, m):
         K.update(xs, Ps, H, R, z, np.empty(m), np.empty((m, m)))
         assert np.array_equal(xd, xs)
         assert np.array_equal(Pd, Ps)
+
+
+@pytest.mark.parametrize('n,m', [(5, 2), (12, 3)])
+def test_joseph_update_over_any_sparse_h_is_the_dense_one_to_the_bit(n, m):
+    """Random sparse H (about 30 % of the entries, values other than 1, rows of several
+    entries, columns shared by rows, empty columns): I - K H is I but in H's columns, and the
+    sandwich over its pattern keeps the dense bits."""
+    rng = np.random.default_rng(7 * n + m)
+    for _ in range(30):
+        H = np.where(rng.uniform(size=(m, n)) < 0.3, rng.normal(size=(m, n)), 0.0)
+        H[0, n - 1] = 2.5                   # the last column always used
+        H[m - 1, 0] = -0.7
+        x = rng.normal(size=n)
+        P = _spd(n, rng)
+        R = np.diag(rng.uniform(0.1, 1.0, m))
+        z = rng.normal(size=m)
+        xd, Pd, xs, Ps = x.copy(), P.copy(), x.copy(), P.copy()
+        dense_joseph(xd, Pd, H, R, z)
+        K.update(xs, Ps, H, R, z, np.empty(m), np.empty((m, m)))
+        assert np.array_equal(xd, xs)
+        assert np.array_equal(Pd, Ps)
+    assert np.count_nonzero(H) < m * n             # I - K H really has zeros to skip

@@ -274,25 +274,24 @@ def publish_counted(node, pub, msg, what: str, seq=None) -> None:
         node.get_logger().error(f'publishing {what} failed: {err}', throttle_duration_sec=1.0)
 
 
-class MatchReport:
-    """What DDS has matched to a node's subscriptions, for :class:`StartGate`: latched JSON
-    {topic: publishers matched} on ``~/matched``, published when it changes (the recorder)."""
-    TOPIC = 'matched'
+class CountReport:
+    """JSON {topic: count} on ``~/<TOPIC>``, published when it changed (:meth:`update`);
+    :meth:`parse` reads it back."""
+    TOPIC = ''
 
-    def __init__(self, node):
+    def __init__(self, node, qos):
         from std_msgs.msg import String
-        self.msg = String
-        self.pub = node.create_publisher(String, f'~/{self.TOPIC}', latched_qos())
-        self.last = None
+        self.msg, self.last = String, None
+        self.pub = node.create_publisher(String, f'~/{self.TOPIC}', qos)
 
-    def update(self, matched: dict):
-        if matched != self.last:
-            self.last = dict(matched)
-            self.pub.publish(self.msg(data=json.dumps(matched, sort_keys=True)))
+    def update(self, counts: dict):
+        if counts != self.last:
+            self.last = dict(counts)
+            self.pub.publish(self.msg(data=json.dumps(counts, sort_keys=True)))
 
     @staticmethod
     def parse(text: str) -> dict:
-        """{topic: count}; anything else (not ours) counts as nothing matched."""
+        """{topic: count}; anything else (not ours) counts as nothing."""
         try:
             got = json.loads(text)
             return {str(k): int(v) for k, v in got.items()} if isinstance(got, dict) else {}
@@ -300,24 +299,26 @@ class MatchReport:
             return {}
 
 
-class ReceivedReport:
-    """How many messages a node (the recorder) has received per topic, for :class:`Pace`: JSON
-    {topic: count} on ``~/received``, published every PERIOD of wall time when it changed."""
+class MatchReport(CountReport):
+    """What DDS has matched to a node's subscriptions, for :class:`StartGate`: {topic:
+    publishers matched} on ``~/matched``, latched (the recorder)."""
+    TOPIC = 'matched'
+
+    def __init__(self, node):
+        super().__init__(node, latched_qos())
+
+
+class ReceivedReport(CountReport):
+    """How many messages a node (the recorder) has received per topic, for :class:`Pace`:
+    {topic: count} on ``~/received``, looked at every PERIOD of wall time."""
     TOPIC = 'received'
     PERIOD = 0.01           # [s]
 
     def __init__(self, node, counts: Callable[[], dict]):
         from rclpy.clock import Clock, ClockType
-        from std_msgs.msg import String
-        self.msg, self.counts, self.last = String, counts, None
-        self.pub = node.create_publisher(String, f'~/{self.TOPIC}', 1)
-        node.create_timer(self.PERIOD, self.update, clock=Clock(clock_type=ClockType.STEADY_TIME))
-
-    def update(self):
-        counts = self.counts()
-        if counts != self.last:
-            self.last = counts
-            self.pub.publish(self.msg(data=json.dumps(counts, sort_keys=True)))
+        super().__init__(node, 1)
+        node.create_timer(self.PERIOD, lambda: self.update(counts()),
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
 
 
 class Pace:
@@ -342,7 +343,7 @@ class Pace:
                                      functools.partial(self._report, name), 10)
 
     def _report(self, name, msg):
-        got = MatchReport.parse(msg.data)
+        got = CountReport.parse(msg.data)
         if got != self.reports.get(name):
             self.reports[name] = got
             self.moved[name] = time.monotonic()
