@@ -79,6 +79,21 @@ def dense_joseph(x, P, H, R, z):
     K.mul(KR, K_, P, P, False, True, True)
 
 
+def _same_bits_as_dense(H, rng):
+    """One Joseph update of a random state through the kernel and through dense_joseph:
+    the same x and P to the bit."""
+    m, n = H.shape
+    x = rng.normal(size=n)
+    P = _spd(n, rng)
+    R = np.diag(rng.uniform(0.1, 1.0, m))
+    z = rng.normal(size=m)
+    xd, Pd, xs, Ps = x.copy(), P.copy(), x.copy(), P.copy()
+    dense_joseph(xd, Pd, H, R, z)
+    K.update(xs, Ps, H, R, z, np.empty(m), np.empty((m, m)))
+    assert np.array_equal(xd, xs)
+    assert np.array_equal(Pd, Ps)
+
+
 @pytest.mark.parametrize('n,m', [(3, 1), (4, 2), (12, 3), (12, 1)])
 def test_joseph_update_is_the_dense_one_to_the_bit(n, m):
     rng = np.random.default_rng(10 * n + m)
@@ -89,15 +104,7 @@ def test_joseph_update_is_the_dense_one_to_the_bit(n, m):
     for j in range(1, m):
         H[j, 1 + j] = 1.0                   # pressures
     for _ in range(20):
-        x = rng.normal(size=n)
-        P = _spd(n, rng)
-        R = np.diag(rng.uniform(0.1, 1.0, m))
-        z = rng.normal(size=m)
-        xd, Pd, xs, Ps = x.copy(), P.copy(), x.copy(), P.copy()
-        dense_joseph(xd, Pd, H, R, z)
-        K.update(xs, Ps, H, R, z, np.empty(m), np.empty((m, m)))
-        assert np.array_equal(xd, xs)
-        assert np.array_equal(Pd, Ps)
+        _same_bits_as_dense(H, rng)
 
 
 @pytest.mark.parametrize('n,m', [(5, 2), (12, 3)])
@@ -110,13 +117,5 @@ def test_joseph_update_over_any_sparse_h_is_the_dense_one_to_the_bit(n, m):
         H = np.where(rng.uniform(size=(m, n)) < 0.3, rng.normal(size=(m, n)), 0.0)
         H[0, n - 1] = 2.5                   # the last column always used
         H[m - 1, 0] = -0.7
-        x = rng.normal(size=n)
-        P = _spd(n, rng)
-        R = np.diag(rng.uniform(0.1, 1.0, m))
-        z = rng.normal(size=m)
-        xd, Pd, xs, Ps = x.copy(), P.copy(), x.copy(), P.copy()
-        dense_joseph(xd, Pd, H, R, z)
-        K.update(xs, Ps, H, R, z, np.empty(m), np.empty((m, m)))
-        assert np.array_equal(xd, xs)
-        assert np.array_equal(Pd, Ps)
+        _same_bits_as_dense(H, rng)
     assert np.count_nonzero(H) < m * n             # I - K H really has zeros to skip
