@@ -151,17 +151,46 @@ def test_loop_thread_runs_at_its_realtime_priority(probe):
     """Issue 46 (overruns under load): the real-time loop thread takes SCHED_FIFO at
     sim_node.thread_priority (default 50) where the OS allows it, and says so on
     /diagnostics; elsewhere 0 (normal scheduling, warned once)."""
-    probe.wait(lambda: probe.diagnostics.latest('plant_sim: loop') is not None, 10,
-               'no loop diagnostics')
+    def running():          # a status sent once the loop thread has started
+        got = probe.diagnostics.latest('plant_sim: loop')
+        return got is not None and int(got.values['ticks']) > 0
+    probe.wait(running, 20, 'no loop diagnostics with ticks')
     loop = probe.diagnostics.latest('plant_sim: loop').values
     assert str(loop['thread_priority']) == ('50' if _fifo_allowed() else '0'), loop
 
 
+CHILD = """
+import json, os, threading
+from eha_ros.nodes.common import realtime_priority
+class Log:
+    def info(self, text): print('info', text)
+    def warning(self, text): print('warning', text)
+done = threading.Event()
+other = threading.Thread(target=done.wait)
+other.start()
+out = {}
+def loop():
+    out['got'] = realtime_priority(50, Log())
+    out['loop'] = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+    later = threading.Thread(target=lambda: out.update(later=os.sched_getscheduler(0)))
+    later.start(); later.join()
+t = threading.Thread(target=loop); t.start(); t.join()
+for name, tid in (('main', threading.get_native_id()), ('other', other.native_id)):
+    out[name] = os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority
+done.set()
+print(json.dumps(out))
+"""
+
+
 def test_realtime_priority_granted_refused_or_off(monkeypatch):
-    """nodes.common.realtime_priority: the calling thread only (another keeps its policy);
-    0 leaves it alone; refused by the OS: 0 and one warning naming the way out."""
+    """nodes.common.realtime_priority (in a process of its own): the calling thread at the
+    priority, the process's other Python threads at 1 (they share the GIL with it), a thread
+    started later inheriting it; 0 leaves everything alone; refused by the OS: 0 and one
+    warning naming the way out."""
+    import json
     import os
-    import threading
+    import subprocess
+    import sys
     from eha_ros.nodes.common import realtime_priority
 
     class Log:
@@ -173,25 +202,24 @@ def test_realtime_priority_granted_refused_or_off(monkeypatch):
 
         def warning(self, text):
             self.lines.append(('warning', text))
-    out = {}
-
-    def in_thread(prio):
-        log = Log()
-        out[prio] = (realtime_priority(prio, log), os.sched_getscheduler(0), log.lines)
-    for prio in (0, 50):
-        t = threading.Thread(target=in_thread, args=(prio,))
-        t.start()
-        t.join()
-    assert out[0] == (0, os.SCHED_OTHER, [])
+    log = Log()
+    assert realtime_priority(0, log) == 0 and log.lines == []
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER
     if _fifo_allowed():
-        assert out[50][:2] == (50, os.SCHED_FIFO)
-        assert out[50][2] == [('info', 'loop thread: SCHED_FIFO priority 50')]
-    assert os.sched_getscheduler(0) == os.SCHED_OTHER          # this thread untouched
+        r = subprocess.run([sys.executable, '-c', CHILD], capture_output=True, text=True,
+                           timeout=60)
+        assert r.returncode == 0, r.stderr
+        out = json.loads(r.stdout.splitlines()[-1])
+        fifo = os.SCHED_FIFO
+        assert out['got'] == 50 and out['loop'] == [fifo, 50], out
+        assert out['main'] == [fifo, 1] and out['other'] == [fifo, 1], out
+        assert out['later'] == fifo, out
+        assert 'info loop thread: SCHED_FIFO priority 50 (the 2 other Python threads: 1)' in \
+            r.stdout, r.stdout
 
     def refuse(*_):
         raise PermissionError(1, 'Operation not permitted')
     monkeypatch.setattr(os, 'sched_setscheduler', refuse)
-    log = Log()
     assert realtime_priority(50, log) == 0
     assert len(log.lines) == 1 and log.lines[0][0] == 'warning'
     assert 'refused (Operation not permitted)' in log.lines[0][1] and 'ulimit -r 50' in \

@@ -1,6 +1,6 @@
 """scripts/bench soak --duration S: a long run of the composed real-time stack with the recorder
-(what `run_stack --record` starts: eha_loop hosting plant_sim, estimator, controller and
-switch_manager, and the recorder), measured (issue 45).
+(what `run_stack --record` starts: eha_loop hosting plant_sim, estimator, controller,
+switch_manager and the recorder), measured (issue 45).
 
 Reported: resident memory (RSS) of every process after the loop started and at the end, and its
 growth per hour; ticks, lost ticks (a state whose command missed the next tick) and overruns
