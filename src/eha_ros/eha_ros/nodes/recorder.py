@@ -38,8 +38,10 @@ class Recorder:
         if p['recorder.diagnostics']:
             extra.add('/diagnostics')
         self.output = p['recorder.output'] or default_output()
+        guest = getattr(self, 'composed_bus', None) is not None      # inside eha_loop
         self.sink = McapSink(self.output, p['recorder.compression'],
-                             p['recorder.chunk_size'], on_error=self.on_write_error)
+                             p['recorder.chunk_size'], on_error=self.on_write_error,
+                             burst=8 if guest else McapSink.BURST)
         self.started = time.monotonic()
         self.closed = False
         self.exit_code = 0
@@ -51,7 +53,7 @@ class Recorder:
         self.tap = TopicTap(self, p['recorder.namespace'], extra, p['recorder.depth'],
                             self.open_topic, 'recording')
         self.matched = MatchReport(self)     # what the plant side's start gate waits for
-        if getattr(self, 'composed_bus', None) is None:   # what a lock-step plant paces on
+        if not guest:                        # what a lock-step plant paces on
             self.received = ReceivedReport(self, self.counts)
         self.create_timer(p['recorder.discovery_period'], self.discover, clock=wall)
         self.get_logger().info(f'recorder: {self.tap.ns}/*{" + " if extra else ""}'
