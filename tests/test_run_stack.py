@@ -478,7 +478,10 @@ def test_processes_in_real_time_are_stopped_when_they_cannot_hold_the_loop(tmp_p
     if summary['stop_reason'].startswith(('loop supervisor: unanswered: the loop cannot hold',
                                           'loop supervisor: limit_cycle: ')):
         assert r.returncode == 1 and 'run_stack: FAILED: stopped (loop supervisor' in r.stdout
-        assert loop['ticks'] < 0.9 * 20 * 1000   # stopped by the supervisor before --duration
+        # stopped by the supervisor before --duration's ticks; with the loop thread at
+        # SCHED_FIFO (issue 46) the processes lose about 1 % and the supervisor's 2 % of one
+        # second may come late in the run (19.6 s of 20 once)
+        assert loop['ticks'] < 20 * 1000
     else:
         assert summary['stop_reason'] == 'duration' and lost < 0.05, summary['stop_reason']
 
