@@ -477,11 +477,10 @@ def test_processes_in_real_time_are_stopped_when_they_cannot_hold_the_loop(tmp_p
           f'plant lost {100 * lost:.1f} % of {loop["ticks"]} ticks')
     if summary['stop_reason'].startswith(('loop supervisor: unanswered: the loop cannot hold',
                                           'loop supervisor: limit_cycle: ')):
+        # the reason says the supervisor stopped it, before --duration ended the run: with the
+        # loop thread at SCHED_FIFO (issue 46) the processes lose only about 1 % of the ticks
+        # and its 2 % of one second may come late (after 12.4, 19.6 and 19.8 s of 20 seen)
         assert r.returncode == 1 and 'run_stack: FAILED: stopped (loop supervisor' in r.stdout
-        # stopped by the supervisor before --duration's ticks; with the loop thread at
-        # SCHED_FIFO (issue 46) the processes lose about 1 % and the supervisor's 2 % of one
-        # second may come late in the run (19.6 s of 20 once)
-        assert loop['ticks'] < 20 * 1000
     else:
         assert summary['stop_reason'] == 'duration' and lost < 0.05, summary['stop_reason']
 
