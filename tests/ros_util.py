@@ -131,3 +131,13 @@ def wait_matched(*publishers, timeout: float = 60.0):
     assert wait_for(lambda: all(p.get_subscription_count() > 0 for p in publishers), timeout), \
         'no subscriber matched: ' + ', '.join(p.topic_name for p in publishers
                                               if p.get_subscription_count() == 0)
+
+
+def wait_fed(*subscriptions, publishers: int = 1, timeout: float = 60.0):
+    """Block until every subscription has matched ``publishers`` publishers: what a node under
+    test publishes before discovery has paired it with the test's subscription is lost
+    (volatile QoS), and the graph (count_publishers) shows a publisher before DDS has matched
+    it."""
+    assert wait_for(lambda: all(s.get_publisher_count() >= publishers for s in subscriptions),
+                    timeout), 'no publisher matched: ' + ', '.join(
+        s.topic_name for s in subscriptions if s.get_publisher_count() < publishers)

@@ -36,4 +36,6 @@ def test_supervisor_values_read_beside_the_commanding_loop_thread():
         t.join()
         sys.setswitchinterval(old)
     assert not errors, errors
-    assert 0.0 <= values['saturated_share'] <= 0.5001
+    # half the commands saturated; a read between a command's count and the window's oldest
+    # one leaving it may see one saturated command more: 0.5 + 1/n, rounded to 4 digits
+    assert 0.0 <= values['saturated_share'] <= round(0.5 + 1.0 / sup.n, 4)

@@ -15,7 +15,7 @@ from eha_ros.core.ident import experiments as E
 from eha_ros.core.ident.params import SCHEMA
 from eha_ros.core.sim.batch import node_params
 from eha_ros.stack import node_command
-from ros_util import start_process, stop_process, wait_for, wait_matched
+from ros_util import start_process, stop_process, wait_fed, wait_for, wait_matched
 
 pytestmark = pytest.mark.ros
 
@@ -55,10 +55,12 @@ class Loop:
         self.pub_est = node.create_publisher(PositionEstimate, 'eha/estimate', qos)
         self.pub_cmd = node.create_publisher(ActuatorCommand, 'eha/command', qos)
         self.pub_red = node.create_publisher(RedundancyStatus, 'eha/redundancy', latched_qos())
-        node.create_subscription(ActuatorCommand, 'eha/command', self.keep(self.commands), qos)
-        node.create_subscription(PositionReference, 'eha/reference', self.keep(self.references),
-                                 qos)
-        node.create_subscription(ExternalLoad, 'eha/sim/load_force', self.keep(self.loads), qos)
+        self.sub_cmd = node.create_subscription(ActuatorCommand, 'eha/command',
+                                                self.keep(self.commands), qos)
+        self.sub_ref = node.create_subscription(PositionReference, 'eha/reference',
+                                                self.keep(self.references), qos)
+        self.sub_load = node.create_subscription(ExternalLoad, 'eha/sim/load_force',
+                                                 self.keep(self.loads), qos)
         node.create_subscription(String, 'eha/experiment',
                                  lambda m: self.info.append(json.loads(m.data)), latched_qos())
 
@@ -92,7 +94,7 @@ def test_drive_answers_each_estimate_and_stops_on_failed_safe(ros_node):
     try:
         loop = Loop(ros_node)
         wait_matched(loop.pub_state, loop.pub_est, loop.pub_red)
-        assert wait_for(lambda: ros_node.count_publishers('eha/command') >= 2, 60)
+        wait_fed(loop.sub_cmd, publishers=2)    # the node's and the test's own (unused here)
         x, k = 0.001, 0                         # an ideal actuator: x' = D_p/A_p u
         while not loop.info or k < loop.info[0]['params']['start_seq'] + plan.n_ticks // 2:
             loop.tick(k, x, (loop.commands, k))
@@ -134,6 +136,7 @@ def test_closed_loop_sends_references_and_loads_by_seq_and_stops_at_the_stroke(r
     try:
         loop = Loop(ros_node)
         wait_matched(loop.pub_state, loop.pub_est, loop.pub_cmd)
+        wait_fed(loop.sub_ref, loop.sub_load)   # its first reference and load are for tick 2
         k = 0
         while not loop.info or k < loop.info[0]['params']['start_seq'] + plan.n_ticks - lead:
             loop.tick(k, 0.0, (loop.loads, k + lead), answer=True)

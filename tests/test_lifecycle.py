@@ -156,7 +156,9 @@ def test_change_state_and_get_state_on_the_bridge_stack(ros_node, tmp_path):
               f'{np.abs(log[2]).max():.0f} rad/s (piston {1e3 * log[2, "x"]:+.3f} mm)')
         assert seen == ['inactive', 'active', 'inactive', 'active']
         assert np.abs(log[0]).max() > 50.0 and log[0, 'x'] == pytest.approx(0.003, abs=2e-4)
-        assert len(log[1]) > 1000 and np.all(log[1] == 0.0)          # not a single command
+        # not a single command over 1.5 s of states (the PLC's cycles: 945 in one CI run, where
+        # a late bridge cycle skips device cycles)
+        assert len(log[1]) > 500 and np.all(log[1] == 0.0)
         assert log[1, 'x'] == pytest.approx(0.003, abs=2e-4)          # stayed where it was
         assert np.abs(log[2]).max() > 50.0 and abs(log[2, 'x']) < 2e-4   # back to x0
         assert c.loop['state'] == 'active' and c.loop['backend'] == 'ads'

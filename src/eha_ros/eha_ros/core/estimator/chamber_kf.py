@@ -80,6 +80,42 @@ class ChamberKF(MeasuredKF):
         corner = None if gm is None else gm[1]
         n_lin = 4 if gm is None else 5
         self._n_lin = n_lin
+        if friction is None:
+            friction_scale = None                  # phi scales the Stribeck curve only
+        if leakage is None:
+            external = None                        # epsilon splits lambda's paths
+        q, p0 = self._layout(q_diag, p0_diag, gm, q_load, p0_load, flow and friction is not None,
+                             leakage, displacement, compliance, friction_scale, external)
+        n = len(q)
+        self.n = n
+        self.i_gm = 4 if gm is not None else -1
+        self.offset_bound = float(offset_bound)
+        self.edge = 0                               # adaptive states on a bound (last update)
+        params = [i for i in (self.i_leakage, self.i_displacement, self.i_compliance,
+                              self.i_friction, self.i_external_leakage) if i >= 0]
+        self.i_frozen = min(params) if params else n     # the adaptive states are the last
+        self.adapt_gate = float(adapt_gate)
+        self._discretise(corner)
+        self.F, self.G = (a.copy() for a in self.modes[0])   # this tick's pair, copied in
+        self.mode = 0
+        self.Q = np.diag(np.asarray(q, float))
+        self.P0 = np.diag(np.asarray(p0, float))
+        self._measurements(n, None if gm is None else 4, R_pos, (2, 3), R_p)
+        self.u = np.zeros(3)
+        self.u[2] = 1.0
+        self.fk = None if friction is None else self._friction_constants(friction)
+        # the largest pressure difference friction alone can hold (adapt.flow_noise): the
+        # static friction at the top of the friction state's range
+        F_top = friction[1] if friction is not None else F_s
+        self.dp_friction = F_top * (1.0 + self.friction_range[1]) / c.A_p
+        self.reset()
+
+    def _layout(self, q_diag, p0_diag, gm, q_load, p0_load, flow, leakage, displacement,
+                compliance, friction_scale, external):
+        """The state vector: x, xdot, p_A, p_B (, b, F_d, v_f), then the adaptive states;
+        sets their indexes (i_*, -1: not a state) and ranges; returns the per-step process
+        noise and the initial variance of each state."""
+        Ts = self.Ts
         q = list(q_diag)[:3] + [list(q_diag)[2]]
         p0 = list(p0_diag)[:3] + [list(p0_diag)[2]]
         if gm is not None:
@@ -94,7 +130,7 @@ class ChamberKF(MeasuredKF):
             q.append(q_load)
             p0.append(p0_load)
         self.i_flow = -1
-        if flow and friction is not None:           # unmodelled flow v_f, starts closed at 0
+        if flow:                                    # unmodelled flow v_f, starts closed at 0
             self.i_flow = len(q)
             q.append(0.0)
             p0.append(0.0)
@@ -104,11 +140,7 @@ class ChamberKF(MeasuredKF):
         self.i_friction = self.i_external_leakage = -1
         self.leakage_range = self.displacement_range = self.compliance_range = (0.0, 0.0)
         self.friction_range = self.external_leakage_range = (0.0, 0.0)
-        self.c_Ts = c.V_d / (c.beta * Ts)
-        if friction is None:
-            friction_scale = None                  # phi scales the Stribeck curve only
-        if leakage is None:
-            external = None                        # epsilon splits lambda's paths
+        self.c_Ts = self.c.V_d / (self.c.beta * Ts)
         for name, spec in (('leakage', leakage), ('displacement', displacement),
                            ('compliance', compliance), ('friction', friction_scale),
                            ('external_leakage', external)):
@@ -117,16 +149,13 @@ class ChamberKF(MeasuredKF):
                 setattr(self, name + '_range', (float(spec[2]), float(spec[3])))
                 q.append(spec[0])
                 p0.append(spec[1])
-        n = len(q)
-        self.n = n
-        self.i_gm = 4 if gm is not None else -1
-        self.offset_bound = float(offset_bound)
-        self.edge = 0                               # adaptive states on a bound (last update)
-        params = [i for i in (self.i_leakage, self.i_displacement, self.i_compliance,
-                              self.i_friction, self.i_external_leakage) if i >= 0]
-        self.i_frozen = min(params) if params else n     # the adaptive states are the last
-        self.adapt_gate = float(adapt_gate)
-        # (F, G) per check-valve state, index 2 s_a + s_b
+        return q, p0
+
+    def _discretise(self, corner):
+        """(F, G) per check-valve state (:attr:`modes`, index 2 s_a + s_b), ZOH-discretised
+        once, with the ZOH columns of a unit flow into A and B (:attr:`Lm`) and the leakage
+        sensitivities of F (:attr:`Dm`: lambda's paths | epsilon's)."""
+        c, Ts, n, n_lin = self.c, self.Ts, self.n, self._n_lin
         self.modes = []
         L = []                                      # ZOH columns of a unit flow into A, B
         D = []                                      # leakage sensitivity of the ZOH F: lambda's
@@ -152,29 +181,20 @@ class ChamberKF(MeasuredKF):
                 De.append(leak_sensitivity(c, A, Ts, n, 'r') if split else np.zeros((n, n)))
         self.Lm = np.vstack(L)                      # (4 n, 2), rows of mode m at m n
         self.Dm = np.hstack((np.vstack(D), np.vstack(De)))   # (4 n, 2 n): lambda | epsilon
-        self.F, self.G = (a.copy() for a in self.modes[0])   # this tick's pair, copied in
-        self.mode = 0
-        self.Q = np.diag(np.asarray(q, float))
-        self.P0 = np.diag(np.asarray(p0, float))
-        self._measurements(n, None if gm is None else 4, R_pos, (2, 3), R_p)
-        self.u = np.zeros(3)
-        self.u[2] = 1.0
-        self.fk = None                              # adapt.friction_input constants
-        if friction is not None:
-            fk = np.zeros(adapt.NFK)
-            fk[adapt.FK_AP], fk[adapt.FK_DP] = c.A_p, c.D_p
-            fk[adapt.FK_CX], fk[adapt.FK_CR], fk[adapt.FK_PACC] = c.C_x, c.C_r, c.p_acc
-            (fk[adapt.FK_FC], fk[adapt.FK_FS], fk[adapt.FK_VS], fk[adapt.FK_ALPHA],
-             fk[adapt.FK_VREST], fk[adapt.FK_NREST], fk[adapt.FK_QREST]) = friction
-            fk[adapt.FK_ILAM], fk[adapt.FK_IDEL] = self.i_leakage, self.i_displacement
-            fk[adapt.FK_IPHI] = self.i_friction
-            fk[adapt.FK_IEPS] = self.i_external_leakage
-            self.fk = fk
-        # the largest pressure difference friction alone can hold (adapt.flow_noise): the
-        # static friction at the top of the friction state's range
-        F_top = friction[1] if friction is not None else F_s
-        self.dp_friction = F_top * (1.0 + self.friction_range[1]) / c.A_p
-        self.reset()
+
+    def _friction_constants(self, friction):
+        """adapt.friction_input's constants: the circuit's, the Stribeck curve's and its rest
+        regime's (``friction``), the adaptive states' indexes."""
+        c = self.c
+        fk = np.zeros(adapt.NFK)
+        fk[adapt.FK_AP], fk[adapt.FK_DP] = c.A_p, c.D_p
+        fk[adapt.FK_CX], fk[adapt.FK_CR], fk[adapt.FK_PACC] = c.C_x, c.C_r, c.p_acc
+        (fk[adapt.FK_FC], fk[adapt.FK_FS], fk[adapt.FK_VS], fk[adapt.FK_ALPHA],
+         fk[adapt.FK_VREST], fk[adapt.FK_NREST], fk[adapt.FK_QREST]) = friction
+        fk[adapt.FK_ILAM], fk[adapt.FK_IDEL] = self.i_leakage, self.i_displacement
+        fk[adapt.FK_IPHI] = self.i_friction
+        fk[adapt.FK_IEPS] = self.i_external_leakage
+        return fk
 
     def reset(self, position: float = 0.0, p_a: float | None = None,
               p_b: float | None = None):
