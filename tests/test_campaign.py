@@ -184,6 +184,24 @@ def test_nominal_runs_give_the_stack_figures():
         assert figs['max_abs_command'] == pytest.approx(837.758041)     # it does saturate
 
 
+def test_sine_error_parts_find_the_mean_the_sine_frequency_and_the_slow_wander():
+    """error_parts on an error of known parts: 2 um mean, 3 um rms at the sine's 1 Hz, 1 um rms
+    at 0.25 Hz (slow), 0.5 um rms at 3 Hz (a harmonic: in none of the three)."""
+    Ts = 1e-3
+    t = 6.0 + np.arange(24000) * Ts
+    rms = np.sqrt(2.0)
+    e = (2e-6 + 3e-6 * rms * np.sin(2 * np.pi * t + 0.3) + 1e-6 * rms * np.sin(np.pi * t / 2)
+         + 0.5e-6 * rms * np.sin(6 * np.pi * t))
+    parts = SC.error_parts(t, e, 1.0, Ts)
+    assert parts['error_mean_m'] == pytest.approx(2e-6, rel=1e-6)
+    assert parts['error_at_freq_m'] == pytest.approx(3e-6, rel=1e-6)
+    assert parts['error_slow_m'] == pytest.approx(1e-6, rel=1e-3)
+    # on the nominal plant the parts are a split of the RMSE: none above it, the three below it
+    figs, _ = SC.run(SC.load('sine'), C.nominal_params(), {c: 1.0 for c in F.COLUMNS}, 1)
+    split = [figs[k] for k in ('error_mean_m', 'error_at_freq_m', 'error_slow_m')]
+    assert np.sqrt(np.sum(np.square(split))) <= figs['estimate_rmse_m'] and min(split) > 0
+
+
 def test_false_alarm_scenario_counts_alarms_without_a_fault():
     """false_alarm.yaml's form (fault at the run's end: never injected), shortened to 3 s."""
     scn = SC.load('false_alarm')

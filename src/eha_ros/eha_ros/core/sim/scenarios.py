@@ -391,14 +391,37 @@ def stiffness_figures(s, p, Ts):
 
 
 def sine_figures(s, p, Ts):
-    """RMSE(estimate - truth) / RMSE(raw sensor - truth) over the window; tracking RMSE."""
+    """RMSE(estimate - truth) / RMSE(raw sensor - truth) over the window; tracking RMSE; the
+    estimate error's parts (:func:`error_parts`)."""
     t = s['t']
     w = (t >= p['window'][0]) & (t <= p['window'][1])
     x = s['truth'][w]
     e_est = np.sqrt(np.mean((s['estimate'][w] - x) ** 2))
     e_raw = np.sqrt(np.mean((s['measured'][w] - x) ** 2))
     return {'rmse_ratio': float(e_est / e_raw), 'estimate_rmse_m': float(e_est),
-            'tracking_rmse_m': float(np.sqrt(np.mean((x - s['reference'][w]) ** 2)))}
+            'tracking_rmse_m': float(np.sqrt(np.mean((x - s['reference'][w]) ** 2))),
+            **error_parts(t[w], s['estimate'][w] - x, p['freq'], Ts)}
+
+
+SLOW_BAND = 0.9         # error_slow_m: below this fraction of the sine's frequency
+
+
+def error_parts(t, e, freq: float, Ts: float) -> dict:
+    """Where an estimate error e(t) under a sine of ``freq`` comes from, each an rms [m]:
+    its mean over the window (error_mean_m), its component at the sine's frequency (least
+    squares on sin, cos; error_at_freq_m: a gain or phase error of the model), and what is
+    left below SLOW_BAND x freq (error_slow_m: the sensor's slow Gauss-Markov wander taken
+    into the estimate). RMSE^2 = mean^2 + at_freq^2 + the rest (slow, harmonics, noise)."""
+    wt = 2.0 * np.pi * freq * t
+    M = np.column_stack((np.ones_like(t), np.sin(wt), np.cos(wt)))
+    c, *_ = np.linalg.lstsq(M, e, rcond=None)
+    rest = e - M @ c
+    f = np.fft.rfftfreq(len(rest), Ts)
+    power = 2.0 * np.abs(np.fft.rfft(rest)) ** 2 / len(rest) ** 2   # one-sided, rms^2 per bin
+    slow = power[(f > 0.0) & (f < SLOW_BAND * freq)].sum()
+    return {'error_mean_m': float(abs(c[0])),
+            'error_at_freq_m': float(np.hypot(c[1], c[2]) / np.sqrt(2.0)),
+            'error_slow_m': float(np.sqrt(slow))}
 
 
 def handover_figures(s, p, t_event: float):
