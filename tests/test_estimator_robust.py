@@ -210,6 +210,76 @@ def test_load_variation_tells_a_varying_load_from_a_held_one():
     assert not varying(np.zeros(t.size)).any()
 
 
+def test_load_moving_holds_through_a_sinusoidal_load_not_a_step_nor_friction_flips():
+    """adapt.load_moving (the force state's q_load_varying): a 1 Hz 5 kN load (2 MPa) swings
+    from its first full swing on (beyond the band above and below its mean) and holds through
+    every crossing of its mean (LOAD_MOVING_HOLD); a 5 kN step, its removal, friction's flips
+    under a sine without load (a 0.5 MPa square wave: about friction x2) and no load never
+    swing.
+    The band is the stack's: LOAD_SWING_BAND x the 0.74 MPa friction holds."""
+    Ts, dp_load = 1e-3, adapt.LOAD_SWING_BAND * 0.74e6
+    alphas = (Ts / 0.25, Ts / adapt.LOAD_VARIANCE_TIME)
+    hold = round(adapt.LOAD_MOVING_HOLD / Ts)
+    t = np.arange(6000) * Ts
+
+    def moving(dp):
+        x, lv, out = np.zeros(6), np.zeros(adapt.NLV), np.zeros(t.size, bool)
+        for k in range(t.size):
+            x[2], x[3] = 5e6 + dp[k], 5e6
+            out[k] = adapt.load_moving(x, lv, dp_load, hold)
+            adapt.load_variation(x, lv, *alphas)
+        return out
+
+    sine = moving(1.94e6 * np.sin(2 * np.pi * t))
+    first = t[np.argmax(sine)]
+    print(f'\n1 Hz 5 kN load: swinging from {first:.3f} s on')
+    assert 0.4 < first < 0.6 and sine[t >= first].all()
+    step = np.where(t >= 1.0, 1.94e6, 0.0)
+    assert not moving(step).any() and not moving(step[::-1]).any()
+    assert not moving(0.5e6 * np.sign(np.sin(2 * np.pi * t))).any()
+    assert not moving(np.zeros(t.size)).any()
+
+
+def test_force_noise_under_a_swinging_load_keeps_the_stiffness():
+    """Campaign scenario stiffness on a C_eq x10 corner of Table 4.5 (D_p x0.8, beta x0.7, k_T
+    x0.8, k_E x1.2; tuning seed 4's run 2): with the force state's random walk at q_load (0.01
+    N a tick) a 5 kN load at 1 Hz, 31 N a tick, is left to the adaptive states; they settle on
+    a wrong combination (displacement on its bound) and the 1 Hz stiffness misses its limit
+    (43.3 kN/mm against 44.0). With q_load_varying while the load swings (adapt.load_moving,
+    from its first full swing on) the limit is met. What neither removes: the
+    filter_sensor_disagree alarm 0.76 s in, before the first full swing (printed)."""
+    from eha_ros.core.sim import campaign, scenarios
+    from eha_ros.core.sim.batch import build_loop
+    from eha_ros.core.sim.family import plant_params
+    from eha_ros.core.sim.closed_loop import R_X0
+    row = dict(GRID, C_eq=10.0, D_p=0.8, beta=0.7, k_T=0.8, k_E=1.2)
+    nominal = campaign.nominal_params()
+    scn = scenarios.load('stiffness')
+    limits = campaign.plant_limits(scn, row, nominal)[0]
+    plant = plant_params(nominal['plant_sim'], row)
+    Ts = plant['plant.sim.Ts']
+    ref, load, _, _ = scenarios.signals(scn, Ts)
+    est = nominal['estimator']
+    res = {}
+    for q in (est['estimator.model.q_load_varying'], est['estimator.model.q_load']):
+        params = dict(nominal, plant_sim=plant,
+                      estimator=dict(est, **{'estimator.model.q_load_varying': q}))
+        loop = build_loop(params, campaign.noise_seed(4, 2))
+        rec, alarms = [], 0
+        for k in range(0, len(ref), 20):
+            rec.append(loop.run(ref[k:k + 20], load[k:k + 20], k0=k))
+            alarms += adapt.alarm(loop.est.consistency)
+        sig = dict(t=np.arange(len(ref)) * Ts, load=load, truth=np.vstack(rec)[:, R_X0])
+        f = scenarios.FIGURES['stiffness'](sig, scn.params, Ts)
+        res[q] = alarms, {m: f[m] / limits[m][1] for m in limits}
+    on, off = (res[q] for q in res)
+    print(f'\nalarmed samples (of 20 ticks) / stiffness over its limit at 1/4/7 Hz: with '
+          f'q_load_varying {on[0]} / {"/".join(f"{v:.3f}" for v in on[1].values())}, at q_load '
+          f'{off[0]} / {"/".join(f"{v:.3f}" for v in off[1].values())}')
+    assert min(off[1].values()) < 1.0
+    assert min(on[1].values()) >= 1.0
+
+
 GRID = dict(friction=1.0, noise=1.0, leak_split=1.0)     # Table 4.5: the datasheet's
 
 
@@ -221,10 +291,11 @@ def test_position_noise_under_a_varying_load_keeps_the_stiffness(row):
     (49 kN/mm; at the softest corner, whose loaded leakage is beyond Table 4.5, 0.9 x the
     linear loop at that leakage: campaign.plant_limits). With the position noise at q_x's value
     under the varying load the sensor offset state b takes the piston's motion at low
-    frequency (b at 4 sigma) while the loop holds the estimate: both miss. With q_x_offset
+    frequency (b at 4 sigma) while the loop holds the estimate: both miss (since the force
+    state's q_load_varying, by 1 % at 7 Hz and 6 % at 1 Hz). With q_x_offset
     (adapt.disagree_noise) the estimate follows the sensor at low frequency: plant 211 meets it
-    three times over; the softest corner, whose loop on the true position reaches only 1.15 /
-    1.11 / 1.07 of its limit, within 3 % of it at every frequency (0.66 at 1 Hz without)."""
+    over twice; the softest corner, whose loop on the true position reaches only 1.15 / 1.11 /
+    1.07 of its limit, 1.05 / 1.02 / 1.04 (within 3 % of it before q_load_varying)."""
     from eha_ros.core.sim import campaign, scenarios
     nominal = campaign.nominal_params()
     scn = scenarios.load('stiffness')
@@ -239,8 +310,8 @@ def test_position_noise_under_a_varying_load_keeps_the_stiffness(row):
     print(f'\n{row}: stiffness over its limit at 1/4/7 Hz with the position noise open under '
           f'the varying load {"/".join(f"{v:.2f}" for v in res[on].values())}, without '
           f'{"/".join(f"{v:.2f}" for v in res[off].values())}')
-    assert min(res[off].values()) < 0.95
-    assert min(res[on].values()) >= (1.0 if row['C_eq'] < 10 else 0.97)
+    assert min(res[off].values()) < 1.0
+    assert min(res[on].values()) >= 1.0
 
 
 @pytest.mark.parametrize('scale', [[1, 1, 1, 1, 1], [10, 0.8, 0.7, 1.2, 0.8]])

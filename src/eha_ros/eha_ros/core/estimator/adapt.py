@@ -65,6 +65,13 @@ FLOW_REPORT = 2.0e-5        # [m/s] |v_f| reported as model_mismatch above it (f
 #                             load-step spec's steady error (20 um) per second
 LOAD_VARIANCE_TIME = 2.0    # [s] time constant of the pressure difference's variance about
 #                             its mean (load_variation)
+LOAD_SWING_BAND = 1.5       # load_moving's band: x the pressure difference friction holds at
+#                             the top of the friction state's range (high-friction plants flip
+#                             by about that in a sine without load)
+LOAD_MOVING_HOLD = 1.0      # [s] load_moving holds each side this long after the pressure
+#                             difference was last beyond the band on it: a 5 kN load at 1 Hz is
+#                             beyond it on one side for 38 % of its period, so the hold bridges
+#                             the rest (down to about 0.8 Hz) and the crossings of its mean
 
 # piston-friction model constants (array fk) and state (array fs): :func:`friction_input`
 FK_AP, FK_DP, FK_CX, FK_CR, FK_PACC, FK_FC, FK_FS, FK_VS, FK_ALPHA, FK_ILAM, FK_IDEL, \
@@ -84,9 +91,10 @@ NMS = 6
 FL_N, FL_DP, FL_ACTIVE = 0, 1, 2
 NFLOW = 3
 
-# load_variation state (array lv): mean of p_A - p_B, its variance about that mean
-LV_DPM, LV_DPV = 0, 1
-NLV = 2
+# load_variation state (array lv): mean of p_A - p_B, its variance about that mean; and
+# load_moving's hold counters (ticks left) above and below that mean
+LV_DPM, LV_DPV, LV_ABOVE, LV_BELOW = 0, 1, 2, 3
+NLV = 4
 
 
 @njit(cache=True)
@@ -335,6 +343,25 @@ def load_varying(lv, dp_load) -> bool:
     faster than the adaptive states follow (:func:`disagree_noise`'s q_x_offset); a held one
     is :func:`flow_noise`'s."""
     return lv[LV_DPV] > dp_load * dp_load
+
+
+@njit(cache=True)
+def load_moving(x, lv, dp_load, hold_ticks) -> bool:
+    """The load swings: within the last ``hold_ticks`` updates (LOAD_MOVING_HOLD) the pressure
+    difference was more than dp_load above its mean over offset_load_mean
+    (:func:`load_variation`) and also more than dp_load below it (lv[LV_ABOVE], lv[LV_BELOW]
+    count down from each). A sinusoidal load does so from its first full swing on, and holds
+    it through the crossings of its mean, where it moves fastest; a load step or its removal
+    (one side only) does not, and neither do friction's flips under a sine without load
+    (0.25 MPa rms on the nominal plant, about twice that at friction x2: the caller's band
+    is LOAD_SWING_BAND x the 0.74 MPa friction holds)."""
+    dev = x[2] - x[3] - lv[LV_DPM]
+    for i, beyond in ((LV_ABOVE, dev > dp_load), (LV_BELOW, dev < -dp_load)):
+        if beyond:
+            lv[i] = hold_ticks
+        elif lv[i] > 0.0:
+            lv[i] -= 1.0
+    return lv[LV_ABOVE] > 0.0 and lv[LV_BELOW] > 0.0
 
 
 @njit(cache=True)
