@@ -28,7 +28,7 @@ DERIVED = {
     'friction': 'model.friction_* and the plant (adapt.friction_input)', 'q_x': 'model.q[0]',
     'flow_ticks': 'model.flow_time / Ts', 'dp_friction': 'plant friction, friction_range',
     'alpha_load': 'model.offset_load_mean, adapt.LOAD_VARIANCE_TIME',
-    'load_hold': 'adapt.LOAD_MOVING_HOLD / Ts',
+    'load_hold': 'adapt.LOAD_SWING_HOLD / Ts',
     'flow_report': 'adapt.FLOW_REPORT',
     'hold_rate': 'Ts / model.hold_blend_time (stages: hold_blend)',
     'noise_adapt': 'stages: noise_level',

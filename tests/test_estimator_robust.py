@@ -210,34 +210,34 @@ def test_load_variation_tells_a_varying_load_from_a_held_one():
     assert not varying(np.zeros(t.size)).any()
 
 
-def test_load_moving_holds_through_a_sinusoidal_load_not_a_step_nor_friction_flips():
-    """adapt.load_moving (the force state's q_load_varying): a 1 Hz 5 kN load (2 MPa) swings
+def test_load_swinging_holds_through_a_sinusoidal_load_not_a_step_nor_friction_flips():
+    """adapt.load_swinging (the force state's q_load_swing): a 1 Hz 5 kN load (2 MPa) swings
     from its first full swing on (beyond the band above and below its mean) and holds through
-    every crossing of its mean (LOAD_MOVING_HOLD); a 5 kN step, its removal, friction's flips
+    every crossing of its mean (LOAD_SWING_HOLD); a 5 kN step, its removal, friction's flips
     under a sine without load (a 0.5 MPa square wave: about friction x2) and no load never
     swing.
     The band is the stack's: LOAD_SWING_BAND x the 0.74 MPa friction holds."""
     Ts, dp_load = 1e-3, adapt.LOAD_SWING_BAND * 0.74e6
     alphas = (Ts / 0.25, Ts / adapt.LOAD_VARIANCE_TIME)
-    hold = round(adapt.LOAD_MOVING_HOLD / Ts)
+    hold = round(adapt.LOAD_SWING_HOLD / Ts)
     t = np.arange(6000) * Ts
 
-    def moving(dp):
+    def swinging(dp):
         x, lv, out = np.zeros(6), np.zeros(adapt.NLV), np.zeros(t.size, bool)
         for k in range(t.size):
             x[2], x[3] = 5e6 + dp[k], 5e6
-            out[k] = adapt.load_moving(x, lv, dp_load, hold)
+            out[k] = adapt.load_swinging(x, lv, dp_load, hold)
             adapt.load_variation(x, lv, *alphas)
         return out
 
-    sine = moving(1.94e6 * np.sin(2 * np.pi * t))
+    sine = swinging(1.94e6 * np.sin(2 * np.pi * t))
     first = t[np.argmax(sine)]
     print(f'\n1 Hz 5 kN load: swinging from {first:.3f} s on')
     assert 0.4 < first < 0.6 and sine[t >= first].all()
     step = np.where(t >= 1.0, 1.94e6, 0.0)
-    assert not moving(step).any() and not moving(step[::-1]).any()
-    assert not moving(0.5e6 * np.sign(np.sin(2 * np.pi * t))).any()
-    assert not moving(np.zeros(t.size)).any()
+    assert not swinging(step).any() and not swinging(step[::-1]).any()
+    assert not swinging(0.5e6 * np.sign(np.sin(2 * np.pi * t))).any()
+    assert not swinging(np.zeros(t.size)).any()
 
 
 def test_force_noise_under_a_swinging_load_keeps_the_stiffness():
@@ -245,7 +245,7 @@ def test_force_noise_under_a_swinging_load_keeps_the_stiffness():
     x0.8, k_E x1.2; tuning seed 4's run 2): with the force state's random walk at q_load (0.01
     N a tick) a 5 kN load at 1 Hz, 31 N a tick, is left to the adaptive states; they settle on
     a wrong combination (displacement on its bound) and the 1 Hz stiffness misses its limit
-    (43.3 kN/mm against 44.0). With q_load_varying while the load swings (adapt.load_moving,
+    (43.3 kN/mm against 44.0). With q_load_swing while the load swings (adapt.load_swinging,
     from its first full swing on) the limit is met. What neither removes: the
     filter_sensor_disagree alarm 0.76 s in, before the first full swing (printed)."""
     from eha_ros.core.sim import campaign, scenarios
@@ -261,9 +261,9 @@ def test_force_noise_under_a_swinging_load_keeps_the_stiffness():
     ref, load, _, _ = scenarios.signals(scn, Ts)
     est = nominal['estimator']
     res = {}
-    for q in (est['estimator.model.q_load_varying'], est['estimator.model.q_load']):
+    for q in (est['estimator.model.q_load_swing'], est['estimator.model.q_load']):
         params = dict(nominal, plant_sim=plant,
-                      estimator=dict(est, **{'estimator.model.q_load_varying': q}))
+                      estimator=dict(est, **{'estimator.model.q_load_swing': q}))
         loop = build_loop(params, campaign.noise_seed(4, 2))
         rec, alarms = [], 0
         for k in range(0, len(ref), 20):
@@ -274,7 +274,7 @@ def test_force_noise_under_a_swinging_load_keeps_the_stiffness():
         res[q] = alarms, {m: f[m] / limits[m][1] for m in limits}
     on, off = (res[q] for q in res)
     print(f'\nalarmed samples (of 20 ticks) / stiffness over its limit at 1/4/7 Hz: with '
-          f'q_load_varying {on[0]} / {"/".join(f"{v:.3f}" for v in on[1].values())}, at q_load '
+          f'q_load_swing {on[0]} / {"/".join(f"{v:.3f}" for v in on[1].values())}, at q_load '
           f'{off[0]} / {"/".join(f"{v:.3f}" for v in off[1].values())}')
     assert min(off[1].values()) < 1.0
     assert min(on[1].values()) >= 1.0
@@ -292,10 +292,10 @@ def test_position_noise_under_a_varying_load_keeps_the_stiffness(row):
     linear loop at that leakage: campaign.plant_limits). With the position noise at q_x's value
     under the varying load the sensor offset state b takes the piston's motion at low
     frequency (b at 4 sigma) while the loop holds the estimate: both miss (since the force
-    state's q_load_varying, by 1 % at 7 Hz and 6 % at 1 Hz). With q_x_offset
+    state's q_load_swing, by 1 % at 7 Hz and 6 % at 1 Hz). With q_x_offset
     (adapt.disagree_noise) the estimate follows the sensor at low frequency: plant 211 meets it
     over twice; the softest corner, whose loop on the true position reaches only 1.15 / 1.11 /
-    1.07 of its limit, 1.05 / 1.02 / 1.04 (within 3 % of it before q_load_varying)."""
+    1.07 of its limit, 1.05 / 1.02 / 1.04 (within 3 % of it before q_load_swing)."""
     from eha_ros.core.sim import campaign, scenarios
     nominal = campaign.nominal_params()
     scn = scenarios.load('stiffness')

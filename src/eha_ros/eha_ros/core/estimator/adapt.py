@@ -65,10 +65,10 @@ FLOW_REPORT = 2.0e-5        # [m/s] |v_f| reported as model_mismatch above it (f
 #                             load-step spec's steady error (20 um) per second
 LOAD_VARIANCE_TIME = 2.0    # [s] time constant of the pressure difference's variance about
 #                             its mean (load_variation)
-LOAD_SWING_BAND = 1.5       # load_moving's band: x the pressure difference friction holds at
+LOAD_SWING_BAND = 1.5       # load_swinging's band: x the pressure difference friction holds at
 #                             the top of the friction state's range (high-friction plants flip
 #                             by about that in a sine without load)
-LOAD_MOVING_HOLD = 1.0      # [s] load_moving holds each side this long after the pressure
+LOAD_SWING_HOLD = 1.0       # [s] load_swinging holds each side this long after the pressure
 #                             difference was last beyond the band on it: a 5 kN load at 1 Hz is
 #                             beyond it on one side for 38 % of its period, so the hold bridges
 #                             the rest (down to about 0.8 Hz) and the crossings of its mean
@@ -92,7 +92,7 @@ FL_N, FL_DP, FL_ACTIVE = 0, 1, 2
 NFLOW = 3
 
 # load_variation state (array lv): mean of p_A - p_B, its variance about that mean; and
-# load_moving's hold counters (ticks left) above and below that mean
+# load_swinging's hold counters (ticks left) above and below that mean
 LV_DPM, LV_DPV, LV_ABOVE, LV_BELOW = 0, 1, 2, 3
 NLV = 4
 
@@ -346,8 +346,8 @@ def load_varying(lv, dp_load) -> bool:
 
 
 @njit(cache=True)
-def load_moving(x, lv, dp_load, hold_ticks) -> bool:
-    """The load swings: within the last ``hold_ticks`` updates (LOAD_MOVING_HOLD) the pressure
+def load_swinging(x, lv, dp_load, hold_ticks) -> bool:
+    """The load swings: within the last ``hold_ticks`` updates (LOAD_SWING_HOLD) the pressure
     difference was more than dp_load above its mean over offset_load_mean
     (:func:`load_variation`) and also more than dp_load below it (lv[LV_ABOVE], lv[LV_BELOW]
     count down from each). A sinusoidal load does so from its first full swing on, and holds

@@ -139,7 +139,7 @@ class Estimator:
         m = e + 'model.'
         self.i_load = -1 if not self.is_model or self.kf.i_load is None else self.kf.i_load
         self.q_load, self.q_load_jump = params[m + 'q_load'], params[m + 'q_load_jump']
-        self.q_load_varying = params[m + 'q_load_varying']
+        self.q_load_swing = params[m + 'q_load_swing']
         self.load_jump_z = params[m + 'load_jump_z']
         self.q_x, self.q_x_disagree = params[m + 'q'][0], params[m + 'q_x_disagree']
         self.position_gm_sigma = params['plant.sensors.position_gm_sigma']
@@ -152,7 +152,7 @@ class Estimator:
                           else 0.0)
         self.alpha_load = (self.Ts / params[m + 'offset_load_mean'],
                            self.Ts / adapt.LOAD_VARIANCE_TIME)
-        self.load_hold = round(adapt.LOAD_MOVING_HOLD / self.Ts)
+        self.load_hold = round(adapt.LOAD_SWING_HOLD / self.Ts)
         self.load_s = np.zeros(adapt.NLV)         # adapt.load_variation's state
         self.monitor_s = np.zeros(adapt.NMS)
         self.noise_k = self._noise_constants(params, pp) if self.chambers else None

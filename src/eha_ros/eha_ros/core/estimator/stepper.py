@@ -55,7 +55,7 @@ CONSTANTS = np.dtype([
     # (adapt.disagree_noise, under a varying load: adapt.load_variation), the flow's
     # (adapt.flow_noise)
     ('i_load', 'f8'), ('q_load', 'f8'), ('q_load_jump', 'f8'), ('load_jump_z', 'f8'),
-    ('q_load_varying', 'f8'), ('load_hold', 'f8'),
+    ('q_load_swing', 'f8'), ('load_hold', 'f8'),
     ('q_x', 'f8'), ('q_x_disagree', 'f8'), ('position_gm_sigma', 'f8'),
     ('q_x_offset', 'f8'), ('alpha_load', 'f8', (2,)),
     ('i_flow', 'f8'), ('q_flow', 'f8'), ('flow_gate', 'f8'), ('flow_ticks', 'f8'),
@@ -130,7 +130,7 @@ def pack(est):
     arrays = pack_filter(kf, k, e, est.is_model, est.chambers)
     for name in ('x_max', 'pressure_min', 'pressure_max', 'max_abs_motor_speed',
                  'alpha_pressure', 'alpha_friction', 'use_pressure', 'isolate', 'i_load',
-                 'q_load', 'q_load_jump', 'load_jump_z', 'q_load_varying', 'load_hold',
+                 'q_load', 'q_load_jump', 'load_jump_z', 'q_load_swing', 'load_hold',
                  'q_x', 'q_x_disagree',
                  'position_gm_sigma', 'q_flow', 'flow_gate', 'flow_ticks', 'flow_share',
                  'flow_report', 'q_x_offset', 'alpha_load', 'hold_rate'):
@@ -380,11 +380,11 @@ def estimate(K, E, a, position, w, pa, pb):
     e.updates += 1
     fd.detect(k.detector, e.detector, position, innov, s00, pz)
     if k.chambers > 0.5:
-        # the force's random walk: q_load_varying while the load swings, q_load else
+        # the force's random walk: q_load_swing while the load swings, q_load else
         band = adapt.LOAD_SWING_BAND * k.dp_friction
-        moving = adapt.load_moving(x, e.load, band, k.load_hold)
+        swinging = adapt.load_swinging(x, e.load, band, k.load_hold)
         adapt.maneuver(Q, int(k.i_load), pz, k.load_jump_z,
-                       (k.q_load_varying if moving else k.q_load) + e.friction[adapt.FS_Q],
+                       (k.q_load_swing if swinging else k.q_load) + e.friction[adapt.FS_Q],
                        k.q_load_jump)
         b_sigma = k.position_gm_sigma * e.noise[noise_level.NS_SX]
         adapt.load_variation(x, e.load, k.alpha_load[0], k.alpha_load[1])
