@@ -207,6 +207,8 @@ class ChamberKF(MeasuredKF):
         kernels.refill(self, 'p_last', np.zeros(4))     # adapt.pressure_increments
         self.p_last[:2] = self.x[2:4]
         kernels.refill(self, 'fs', np.zeros(adapt.NFS))  # adapt.friction_input state
+        if self.fk is not None:             # at rest, as x[1] = 0 says (adapt.friction_input)
+            self.fs[adapt.FS_N] = self.fk[adapt.FK_NREST]
 
     def valve_mode(self) -> int:
         """Index into :attr:`modes` of the check-valve state the prior pressures give:

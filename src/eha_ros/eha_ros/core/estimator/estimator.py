@@ -139,7 +139,6 @@ class Estimator:
         m = e + 'model.'
         self.i_load = -1 if not self.is_model or self.kf.i_load is None else self.kf.i_load
         self.q_load, self.q_load_jump = params[m + 'q_load'], params[m + 'q_load_jump']
-        self.q_load_swing = params[m + 'q_load_swing']
         self.load_jump_z = params[m + 'load_jump_z']
         self.q_x, self.q_x_disagree = params[m + 'q'][0], params[m + 'q_x_disagree']
         self.position_gm_sigma = params['plant.sensors.position_gm_sigma']

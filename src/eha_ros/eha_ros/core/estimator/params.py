@@ -181,12 +181,6 @@ ESTIMATOR = Schema('estimator', [
     Param(E + 'model.q_load_jump', 'float', 'N^2', 1e8, 0.0, 1e14,
           doc='per-step variance of the external force after a sample whose pressure '
               'innovation exceeds load_jump_z (a load step; adjustable-level process noise)'),
-    Param(E + 'model.q_load_swing', 'float', 'N^2', 1e3, 0.0, 1e12,
-          doc='per-step random-walk variance of the external force while the load swings '
-              '(adapt.load_swinging: the pressure difference beyond the band friction holds, '
-              'above and below its mean within LOAD_SWING_HOLD): a 5 kN load at 1 Hz moves '
-              '31 N a tick, which q_load would leave to the adaptive states (issue 42: '
-              'stiffness at C_eq x10); 1e3: 32 N per tick'),
     Param(E + 'model.load_jump_z', 'float', '', 5.0, 0.0, 1e300,
           doc='normalised pressure innovation above which the force state takes q_load_jump'),
     Param(E + 'model.p0_load', 'float', 'N^2', 1e8, 0.0, 1e14,

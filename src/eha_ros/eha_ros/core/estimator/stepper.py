@@ -52,10 +52,11 @@ CONSTANTS = np.dtype([
     ('i_gm', 'f8'), ('offset_bound', 'f8'), ('i_moved', 'f8'), ('moved_gate', 'f8'),
     ('stribeck', 'f8'), ('friction', 'f8', (adapt.NFK,)),       # adapt.friction_input's
     # the Q schedules: the load state's (adapt.maneuver), the position noise's
-    # (adapt.disagree_noise, under a varying load: adapt.load_variation), the flow's
+    # (adapt.disagree_noise, under a varying or swinging load: adapt.load_variation,
+    # adapt.load_swinging), the flow's
     # (adapt.flow_noise)
     ('i_load', 'f8'), ('q_load', 'f8'), ('q_load_jump', 'f8'), ('load_jump_z', 'f8'),
-    ('q_load_swing', 'f8'), ('load_hold', 'f8'),
+    ('load_hold', 'f8'),
     ('q_x', 'f8'), ('q_x_disagree', 'f8'), ('position_gm_sigma', 'f8'),
     ('q_x_offset', 'f8'), ('alpha_load', 'f8', (2,)),
     ('i_flow', 'f8'), ('q_flow', 'f8'), ('flow_gate', 'f8'), ('flow_ticks', 'f8'),
@@ -130,7 +131,7 @@ def pack(est):
     arrays = pack_filter(kf, k, e, est.is_model, est.chambers)
     for name in ('x_max', 'pressure_min', 'pressure_max', 'max_abs_motor_speed',
                  'alpha_pressure', 'alpha_friction', 'use_pressure', 'isolate', 'i_load',
-                 'q_load', 'q_load_jump', 'load_jump_z', 'q_load_swing', 'load_hold',
+                 'q_load', 'q_load_jump', 'load_jump_z', 'load_hold',
                  'q_x', 'q_x_disagree',
                  'position_gm_sigma', 'q_flow', 'flow_gate', 'flow_ticks', 'flow_share',
                  'flow_report', 'q_x_offset', 'alpha_load', 'hold_rate'):
@@ -335,7 +336,8 @@ def consistency(K, E, a, position) -> int:
     if k.chambers > 0.5:
         adapt.disagree_noise(Q, x, int(k.i_gm), k.position_gm_sigma, k.monitor, e.monitor,
                              int(e.edge), k.q_x, k.q_x_disagree,
-                             adapt.load_varying(e.load, k.dp_friction), k.q_x_offset)
+                             adapt.load_varying(e.load, k.dp_friction)
+                             or adapt.swinging(e.load), k.q_x_offset)
     return v
 
 
@@ -380,12 +382,10 @@ def estimate(K, E, a, position, w, pa, pb):
     e.updates += 1
     fd.detect(k.detector, e.detector, position, innov, s00, pz)
     if k.chambers > 0.5:
-        # the force's random walk: q_load_swing while the load swings, q_load else
-        band = adapt.LOAD_SWING_BAND * k.dp_friction
-        swinging = adapt.load_swinging(x, e.load, band, k.load_hold)
+        # does the load swing? (read by consistency: the position noise)
+        adapt.load_swinging(x, e.load, adapt.LOAD_SWING_BAND * k.dp_friction, k.load_hold)
         adapt.maneuver(Q, int(k.i_load), pz, k.load_jump_z,
-                       (k.q_load_swing if swinging else k.q_load) + e.friction[adapt.FS_Q],
-                       k.q_load_jump)
+                       k.q_load + e.friction[adapt.FS_Q], k.q_load_jump)
         b_sigma = k.position_gm_sigma * e.noise[noise_level.NS_SX]
         adapt.load_variation(x, e.load, k.alpha_load[0], k.alpha_load[1])
         rest = (k.stribeck > 0.5 and e.friction[adapt.FS_N] >= k.friction[adapt.FK_NREST]
