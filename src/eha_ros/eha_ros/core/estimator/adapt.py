@@ -37,7 +37,8 @@ Projection: after each update the adaptive states are clipped to their ranges an
 sensor's Gauss-Markov offset b to +-offset_bound (the sensor's own error band); while filter
 and sensor disagree beyond the band, or a parameter sits on its bound, the position's process
 noise opens (:func:`disagree_noise`), so the estimate does not stay away from the measurement,
-whatever the model says; it opens part way under a varying load (:func:`load_variation`).
+whatever the model says; it opens part way under a varying or swinging load
+(:func:`load_variation`, :func:`load_swinging`).
 Also here: the EKF predict with the leakage Jacobian, the load-step process noise
 (:func:`maneuver`) and the consistency monitor (:func:`monitor`).
 """
@@ -360,7 +361,8 @@ def load_swinging(x, lv, dp_load, hold_ticks) -> bool:
     it through the crossings of its mean, where it moves fastest; a load step or its removal
     (one side only) does not, and neither do friction's flips under a sine without load
     (0.25 MPa rms on the nominal plant, about twice that at friction x2: the caller's band
-    is LOAD_SWING_BAND x the 0.74 MPa friction holds)."""
+    is LOAD_SWING_BAND x the 0.74 MPa friction holds). Read by :func:`disagree_noise`
+    (q_x_offset) through :func:`swinging`."""
     dev = x[2] - x[3] - lv[LV_DPM]
     for i, beyond in ((LV_ABOVE, dev > dp_load), (LV_BELOW, dev < -dp_load)):
         if beyond:
