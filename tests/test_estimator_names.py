@@ -29,6 +29,7 @@ DERIVED = {
     'flow_ticks': 'model.flow_time / Ts', 'dp_friction': 'plant friction, friction_range',
     'alpha_load': 'model.offset_load_mean, adapt.LOAD_VARIANCE_TIME',
     'load_hold': 'adapt.LOAD_SWING_HOLD / Ts',
+    'swing_band': 'adapt.LOAD_SWING_BAND x the pressure difference friction holds',
     'flow_report': 'adapt.FLOW_REPORT',
     'hold_rate': 'Ts / model.hold_blend_time (stages: hold_blend)',
     'noise_adapt': 'stages: noise_level',

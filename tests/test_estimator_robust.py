@@ -187,23 +187,37 @@ def test_unmodelled_flow_holds_a_leak_the_adaptive_states_cannot_split():
     assert with_flow < 25e-6
 
 
+LOAD_T = np.arange(6000) * 1e-3
+
+
+def load_flags(dp, noise=None):
+    """Per update, in the compiled estimate step's order (stepper.estimate, consistency):
+    adapt.load_swinging on the previous mean, adapt.load_variation, then load_varying.
+    ``dp``: the pressure difference beyond 5 MPa (Pa), Ts 1 ms; the stack's bands (the 0.74
+    MPa friction holds; LOAD_SWING_BAND x it) and offset_load_mean's default (0.25 s)."""
+    Ts, dp_friction = 1e-3, 0.74e6
+    alphas = (Ts / 0.25, Ts / adapt.LOAD_VARIANCE_TIME)
+    hold = round(adapt.LOAD_SWING_HOLD / Ts)
+    x, lv = np.zeros(6), np.zeros(adapt.NLV)
+    varying, swinging = np.zeros(dp.size, bool), np.zeros(dp.size, bool)
+    for k in range(dp.size):
+        x[2], x[3] = 5e6 + dp[k] + (0.0 if noise is None else noise[k]), 5e6
+        swinging[k] = adapt.load_swinging(x, lv, adapt.LOAD_SWING_BAND * dp_friction, hold)
+        adapt.load_variation(x, lv, *alphas)
+        varying[k] = adapt.load_varying(lv, dp_friction)
+    return varying, swinging
+
+
 def test_load_variation_tells_a_varying_load_from_a_held_one():
     """adapt.load_variation / load_varying (the varying load of disagree_noise's q_x_offset,
     which also keeps the unmodelled flow v_f closed): a 1 Hz 5 kN load (2 MPa) is varying once
     the variance has built up; a 5 kN load step, held, and its removal never are (a step adds
     at most 1/16 of its square), nor is no load."""
-    Ts, dp_load = 1e-3, 0.74e6
-    alphas = (Ts / 0.25, Ts / adapt.LOAD_VARIANCE_TIME)     # offset_load_mean's default
-    t = np.arange(6000) * Ts
+    t = LOAD_T
     noise = 2e4 * np.random.default_rng(1).standard_normal(t.size)
 
     def varying(dp):
-        x, lv, out = np.zeros(6), np.zeros(adapt.NLV), np.zeros(t.size, bool)
-        for k in range(t.size):
-            x[2], x[3] = 5e6 + dp[k] + noise[k], 5e6
-            adapt.load_variation(x, lv, *alphas)
-            out[k] = adapt.load_varying(lv, dp_load)
-        return out
+        return load_flags(dp, noise)[0]
 
     sine = varying(1.94e6 * np.sin(2 * np.pi * t))
     print(f'\n1 Hz 5 kN load: varying after {t[np.argmax(sine)]:.2f} s')
@@ -220,18 +234,10 @@ def test_load_swinging_holds_through_a_sinusoidal_load_not_a_step_nor_friction_f
     removal, friction's flips under a sine without load (a 0.5 MPa square wave: about
     friction x2) and no load never swing.
     The band is the stack's: LOAD_SWING_BAND x the 0.74 MPa friction holds."""
-    Ts, dp_load = 1e-3, adapt.LOAD_SWING_BAND * 0.74e6
-    alphas = (Ts / 0.25, Ts / adapt.LOAD_VARIANCE_TIME)
-    hold = round(adapt.LOAD_SWING_HOLD / Ts)
-    t = np.arange(6000) * Ts
+    t = LOAD_T
 
     def swinging(dp):
-        x, lv, out = np.zeros(6), np.zeros(adapt.NLV), np.zeros(t.size, bool)
-        for k in range(t.size):
-            x[2], x[3] = 5e6 + dp[k], 5e6
-            out[k] = adapt.load_swinging(x, lv, dp_load, hold)
-            adapt.load_variation(x, lv, *alphas)
-        return out
+        return load_flags(dp)[1]
 
     sine = swinging(1.94e6 * np.sin(2 * np.pi * t))
     first = t[np.argmax(sine)]

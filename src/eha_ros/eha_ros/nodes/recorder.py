@@ -41,7 +41,7 @@ class Recorder:
         guest = getattr(self, 'composed_bus', None) is not None      # inside eha_loop
         self.sink = McapSink(self.output, p['recorder.compression'],
                              p['recorder.chunk_size'], on_error=self.on_write_error,
-                             burst=8 if guest else McapSink.BURST)
+                             burst=McapSink.GUEST_BURST if guest else McapSink.BURST)
         self.started = time.monotonic()
         self.closed = False
         self.exit_code = 0

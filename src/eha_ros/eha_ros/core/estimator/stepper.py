@@ -56,7 +56,7 @@ CONSTANTS = np.dtype([
     # adapt.load_swinging), the flow's
     # (adapt.flow_noise)
     ('i_load', 'f8'), ('q_load', 'f8'), ('q_load_jump', 'f8'), ('load_jump_z', 'f8'),
-    ('load_hold', 'f8'),
+    ('load_hold', 'f8'), ('swing_band', 'f8'),     # adapt.load_swinging's hold and band
     ('q_x', 'f8'), ('q_x_disagree', 'f8'), ('position_gm_sigma', 'f8'),
     ('q_x_offset', 'f8'), ('alpha_load', 'f8', (2,)),
     ('i_flow', 'f8'), ('q_flow', 'f8'), ('flow_gate', 'f8'), ('flow_ticks', 'f8'),
@@ -171,6 +171,7 @@ def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
                      'i_frozen', 'adapt_gate',
                      'i_flow', 'dp_friction'):
             k[name] = getattr(kf, name)
+        k['swing_band'] = adapt.LOAD_SWING_BAND * kf.dp_friction
         e['edge'], e['p_last'], e['clipped'], e['mode'] = kf.edge, kf.p_last, kf.clipped, kf.mode
         if kf.fk is not None:
             k['stribeck'], k['friction'], e['friction'] = 1.0, kf.fk, kf.fs
@@ -383,7 +384,7 @@ def estimate(K, E, a, position, w, pa, pb):
     fd.detect(k.detector, e.detector, position, innov, s00, pz)
     if k.chambers > 0.5:
         # does the load swing? (read by consistency: the position noise)
-        adapt.load_swinging(x, e.load, adapt.LOAD_SWING_BAND * k.dp_friction, k.load_hold)
+        adapt.load_swinging(x, e.load, k.swing_band, k.load_hold)
         adapt.maneuver(Q, int(k.i_load), pz, k.load_jump_z,
                        k.q_load + e.friction[adapt.FS_Q], k.q_load_jump)
         b_sigma = k.position_gm_sigma * e.noise[noise_level.NS_SX]
