@@ -107,12 +107,15 @@ def test_stiffness_over_dds(stack, tmp_path):
                for r in summary['stiffness'])
     # under a varying load the estimator cannot tell the sensor's 1 Hz Gauss-Markov offset from
     # the piston (docs/estimator.md), so the held truth wanders with it (tens of um). The loop's
-    # answer to 5 kN is |F|/stiffness: ~21 um at 7 Hz, plainly above that wander (coherence
-    # 0.70-0.87 seen), but 3-13 um at 1-4 Hz, where coherence has been seen from 0.04 to 0.59
-    # (CI: 0.036 at 1 Hz, 1741 kN/mm). Noise uncorrelated with the load only adds to |x| in the
-    # single-bin ratio, so it biases the figure low: above its bound it is a conservative pass.
+    # answer to 5 kN is |F|/stiffness: ~21 um at 7 Hz, above that wander (coherence 0.70-0.87
+    # seen; since the position noise opens while the load swings, 0766403, the estimate and so
+    # the held truth follow the sensor's wander more: 0.66-0.76 here, 0.47 once in CI), but 3-13
+    # um at 1-4 Hz, where coherence has been seen from 0.04 to 0.59 (CI: 0.036 at 1 Hz, 1741
+    # kN/mm). Noise uncorrelated with the load only adds to |x| in the single-bin ratio, so it
+    # biases the figure low: above its bound it is a conservative pass. The 7 Hz check asks
+    # that the load's answer is there at all (no answer: coherence near 0).
     coh = {p['freq_hz']: p['coherence'] for p in summary['points']}
-    assert coh[7.0] > 0.5, coh
+    assert coh[7.0] > 0.3, coh
     assert (tmp_path / 'st' / 'stiffness.png').exists()
 
 
