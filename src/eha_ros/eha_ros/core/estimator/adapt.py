@@ -99,20 +99,28 @@ NLV = 4
 
 
 @njit(cache=True)
+def unit_flows(i_eps, pa, pb, dpa, dpb, omega, C_x, C_r, p_acc, D_p, c_Ts):
+    """The nominal flows the adaptive states scale, into chamber A and into B (m^3/s): lambda's
+    (qa, qb: the cross-port flow, and the per-port one too without epsilon), delta's pump flow
+    qd (into A, out of B), kappa's compliance flows (ka, kb) and epsilon's per-port flows (ra,
+    rb). pa, pb: the prior chamber pressures (Pa), dpa, dpb their increments over the previous
+    tick (Pa), omega the held speed (rad/s), c_Ts = V_d/(beta Ts) (m^3/(Pa s))."""
+    xa, xb = -C_x * (pa - pb), -C_x * (pb - pa)        # nominal cross-port flow into A, B
+    ra, rb = -C_r * (pa - p_acc), -C_r * (pb - p_acc)  # nominal per-port flow into A, B
+    qa, qb = (xa, xb) if i_eps >= 0 else (xa + ra, xb + rb)
+    return qa, qb, D_p * omega, -c_Ts * dpa, -c_Ts * dpb, ra, rb
+
+
+@njit(cache=True)
 def parameter_columns(F, L, row0, col0, n_lin, i_lam, i_del, i_kap, i_eps, pa, pb, dpa, dpb,
                       omega, C_x, C_r, p_acc, D_p, c_Ts):
     """F columns of lambda, delta, kappa, epsilon (module doc): L[row0 + i, col0] and
     L[row0 + i, col0 + 1] are the ZOH columns of a unit flow (m^3/s) into chamber A and into
-    chamber B; pa, pb the prior chamber pressures (Pa), dpa, dpb their increments over the
-    previous tick (Pa), omega the held speed (rad/s), c_Ts = V_d/(beta Ts) (m^3/(Pa s)).
-    With epsilon (i_eps >= 0) lambda carries the cross-port flow and epsilon the per-port
-    flow to the accumulator; without, lambda carries both."""
-    xa, xb = -C_x * (pa - pb), -C_x * (pb - pa)        # nominal cross-port flow into A, B
-    ra, rb = -C_r * (pa - p_acc), -C_r * (pb - p_acc)  # nominal per-port flow into A, B
-    qa, qb = (xa, xb) if i_eps >= 0 else (xa + ra, xb + rb)
-    qd = D_p * omega                                   # nominal pump flow into A (out of B)
-    ka = -c_Ts * dpa                                   # nominal compliance flow into A
-    kb = -c_Ts * dpb
+    chamber B, times each state's :func:`unit_flows`. With epsilon (i_eps >= 0) lambda carries
+    the cross-port flow and epsilon the per-port flow to the accumulator; without, lambda
+    carries both."""
+    qa, qb, qd, ka, kb, ra, rb = unit_flows(i_eps, pa, pb, dpa, dpb, omega, C_x, C_r, p_acc,
+                                            D_p, c_Ts)
     for i in range(n_lin):
         ga = L[row0 + i, col0]
         gb = L[row0 + i, col0 + 1]
@@ -124,6 +132,21 @@ def parameter_columns(F, L, row0, col0, n_lin, i_lam, i_del, i_kap, i_eps, pa, p
             F[i, i_kap] = ga * ka + gb * kb
         if i_eps >= 0:
             F[i, i_eps] = ga * ra + gb * rb
+
+
+@njit(cache=True)
+def parameter_flows(x, i_lam, i_del, i_kap, i_eps, pa, pb, dpa, dpb, omega, C_x, C_r, p_acc,
+                    D_p, c_Ts):
+    """The adaptive states' flows into chamber A and into B (m^3/s): each state times its
+    :func:`unit_flows` (what :func:`parameter_columns` puts in F, before the ZOH columns)."""
+    qa, qb, qd, ka, kb, ra, rb = unit_flows(i_eps, pa, pb, dpa, dpb, omega, C_x, C_r, p_acc,
+                                            D_p, c_Ts)
+    fa = fb = 0.0
+    for i, a, b in ((i_lam, qa, qb), (i_del, qd, -qd), (i_kap, ka, kb), (i_eps, ra, rb)):
+        if i >= 0:
+            fa += x[i] * a
+            fb += x[i] * b
+    return fa, fb
 
 
 @njit(cache=True)

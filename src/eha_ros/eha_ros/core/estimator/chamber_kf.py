@@ -15,12 +15,14 @@ Continuous model: :func:`.hydromech.chamber` (eq. 3.20-3.21 with the check valve
 in {0, 1}: check valve open, below its zero-flow pressure p_c). The valve state is taken from
 the prior pressure estimate: open below p_c, where the linear flow is an inflow (a threshold at
 the cracking pressure would let the line's reverse flow between p_c and p_acc - crack hold a
-free chamber on its valve); the four (F, G) pairs are ZOH-discretised once. Optional states
-as in :class:`~.model_kf.ModelKF`: the sensor's Gauss-Markov offset b and an external force
-F_d; and the adaptive relative leakage, displacement and compliance corrections lambda, delta,
-kappa, an EKF with the leakage Jacobian (:func:`.hydromech.leak_sensitivity`), with the
-estimate projection of :mod:`.adapt` (issue 15: the loop must hold on every plant of Table
-4.5).
+free chamber on its valve), and shut where the tick's flows would lift the chamber above p_c
+with it shut (a check valve passes no reverse flow), unless the measured pressure puts the
+chamber clearly below p_c (stepper.valve_state); the four (F, G) pairs are ZOH-discretised
+once. Optional states as in :class:`~.model_kf.ModelKF`: the sensor's Gauss-Markov offset b
+and an external force F_d; and the adaptive relative leakage, displacement and compliance
+corrections lambda, delta, kappa, an EKF with the leakage Jacobian
+(:func:`.hydromech.leak_sensitivity`), with the estimate projection of :mod:`.adapt` (issue
+15: the loop must hold on every plant of Table 4.5).
 """
 from __future__ import annotations
 
@@ -209,12 +211,6 @@ class ChamberKF(MeasuredKF):
         kernels.refill(self, 'fs', np.zeros(adapt.NFS))  # adapt.friction_input state
         if self.fk is not None:             # at rest, as x[1] = 0 says (adapt.friction_input)
             self.fs[adapt.FS_N] = self.fk[adapt.FK_NREST]
-
-    def valve_mode(self) -> int:
-        """Index into :attr:`modes` of the check-valve state the prior pressures give:
-        2 s_A + s_B, a valve open below p_c."""
-        p_c = self.c.p_c
-        return 2 * int(self.x[2] < p_c) + int(self.x[3] < p_c)
 
     def predict(self, omega: float, p_D: float | None = None, w_friction: float | None = None):
         """One Ts with the motor speed and the piston friction held over the period: the

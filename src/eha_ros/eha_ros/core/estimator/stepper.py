@@ -8,7 +8,8 @@ The constants and the state are named records (:data:`CONSTANTS`, :data:`STATE`:
 as the parameters they come from), the other arrays are the filter's own, named in one
 record (:class:`Arrays`), and the Estimator's state arrays are views into E (nothing is copied
 per tick).
-Order: p_D measured, predict (eq. 4.1-4.2 with eq. 4.36), p_D low-pass, Joseph update
+Order: p_D measured, predict (eq. 4.1-4.2 with eq. 4.36; the chamber filter's check-valve
+state from its prior and this sample's measured pressures), p_D low-pass, Joseph update
 (eq. 4.4-4.6), the adaptive parts, fault detector, consistency monitor.
 """
 from __future__ import annotations
@@ -28,6 +29,11 @@ from .kernels import predict, update_gated, workspace_size
 from .friction import friction_estimate
 
 drop_stale(__file__)
+
+# A chamber whose measured pressure is this many sigma of its noise below p_c sits on its check
+# valve, whatever the filter's states predict (:func:`valve_state`; one sample in 44 of a
+# chamber at p_c passes it; 3 left rare excursions at rest under a load, docs/nodes/estimator.md)
+VALVE_GATE = 2.0
 
 # The constants (K) and the state (E) of one estimator: one-element structured arrays whose
 # fields are named as the parameters they come from (core.estimator.params, without the
@@ -75,6 +81,7 @@ STATE = np.dtype([
     ('w_fric', 'f8'),           # low-passed pump speed: the friction sign of eq. 4.36
     ('edge', 'f8'),             # adaptive states on a bound after the last update
     ('p_last', 'f8', (4,)),     # chamber filter: adapt.pressure_increments' state
+    ('p_meas', 'f8', (2,)),     # chamber filter: this sample's measured p_A, p_B (NaN: none)
     ('clipped', 'f8', (1,)),    # chamber filter: updates in a row that clipped a parameter
     ('hold_weight', 'f8'),      # weight of b in the published position (:func:`published`)
     ('friction', 'f8', (adapt.NFS,)),           # adapt.friction_input's
@@ -165,6 +172,7 @@ def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
     if chambers:
         c = kf.c
         k['p_c'], k['C_x'], k['C_r'], k['p_acc'], k['c_Ts'] = c.p_c, c.C_x, c.C_r, c.p_acc, kf.c_Ts
+        e['p_meas'] = np.nan
         for name in ('i_leakage', 'leakage_range', 'i_displacement', 'displacement_range',
                      'i_compliance', 'compliance_range', 'i_friction', 'friction_range',
                      'i_external_leakage', 'external_leakage_range', 'i_gm', 'offset_bound',
@@ -251,6 +259,50 @@ def pressure_ok(k, pa, pb) -> bool:
 
 
 @njit(cache=True)
+def valve_state(k, e, R, Fm, Gm, n, col0, x, u, omega) -> int:
+    """The chamber filter's check-valve state for this tick, 2 s_A + s_B (index into the
+    stacked Fm, Gm). A valve is open while its chamber's prior pressure is below p_c (where the
+    valve's linear flow is an inflow), unless the tick's flows would lift the chamber above p_c
+    with the valve shut: a check valve passes no reverse flow, and the open mode's linear
+    conductance would hand the pump's flow back to the accumulator for as long as the prior
+    sat below p_c (at a reversal the filling chamber lost 30 um of piston travel on a stiff
+    oil, beta x1.4). That prediction is the filter's own; where this sample's measured pressure
+    (e.p_meas; NaN: none) is below p_c by :data:`VALVE_GATE` sigma of its noise (R), the
+    chamber is on its valve whatever the states predict, and it stays open."""
+    s_a, s_b = x[2] < k.p_c, x[3] < k.p_c
+    on_a = e.p_meas[0] < k.p_c - VALVE_GATE * math.sqrt(R[1, 1])
+    on_b = e.p_meas[1] < k.p_c - VALVE_GATE * math.sqrt(R[2, 2])
+    if s_a and not on_a and shut_pressure(k, e, Fm, Gm, n, col0, s_b, 2, x, u, omega) >= k.p_c:
+        s_a = False
+    if s_b and not on_b and shut_pressure(k, e, Fm, Gm, n, col0, 2 * s_a, 3, x, u,
+                                          omega) >= k.p_c:
+        s_b = False
+    return 2 * s_a + s_b
+
+
+@njit(cache=True)
+def shut_pressure(k, e, Fm, Gm, n, col0, mode, row, x, u, omega) -> float:
+    """Chamber pressure x[row] (2: p_A, 3: p_B) after one tick of the mean prediction in
+    check-valve state ``mode`` (that chamber's valve shut): the model's row, the friction
+    scale's column and the adaptive states' flows (adapt.parameter_flows) through the ZOH
+    columns of a unit flow (Gm[:, col0], Gm[:, col0 + 1])."""
+    r = mode * n + row
+    p = 0.0
+    for j in range(n):
+        p += Fm[r, j] * x[j]
+    for j in range(col0):
+        p += Gm[r, j] * u[j]
+    if k.i_friction >= 0:                      # adapt.friction_column
+        p += Gm[r, 1] * u[1] * x[int(k.i_friction)]
+    pl = e.p_last                              # adapt.pressure_increments, not yet moved on
+    fa, fb = adapt.parameter_flows(x, int(k.i_leakage), int(k.i_displacement),
+                                   int(k.i_compliance), int(k.i_external_leakage), x[2], x[3],
+                                   x[2] - pl[0], x[3] - pl[1], omega, k.C_x, k.C_r, k.p_acc,
+                                   k.D_p, k.c_Ts)
+    return p + Gm[r, col0] * fa + Gm[r, col0 + 1] * fb
+
+
+@njit(cache=True)
 def predict_tick(K, E, a, w):
     """One prediction over Ts with the motor speed averaged over the period (its previous
     value and ``w``): the model's inputs (eq. 4.36 friction, or the chamber filter's Stribeck
@@ -273,9 +325,9 @@ def predict_tick(K, E, a, w):
             pd = e.pd_filt if use_p else x[2] - x[3]
             u[1] = friction_estimate(e.w_fric, pd, k.friction_pressure > 0.5, k.A_p, k.D_p,
                                      k.F_s, k.v_eps)
-        mode = 2 * (x[2] < k.p_c) + (x[3] < k.p_c)
-        e.mode = mode
         n = x.shape[0]
+        mode = valve_state(k, e, a.R, Fm, Gm, n, G.shape[1], x, u, omega)
+        e.mode = mode
         for i in range(n):
             for j in range(n):
                 F[i, j] = Fm[mode * n + i, j]
@@ -318,7 +370,9 @@ def advance(K, E, a, w, pa, pb) -> bool:
     pr_ok = pressure_ok(k, pa, pb)
     if pr_ok:
         e.pd_meas = pa - pb
+    e.p_meas[0], e.p_meas[1] = (pa, pb) if pr_ok and k.use_pressure > 0.5 else (np.nan, np.nan)
     predict_tick(K, E, a, w)
+    e.p_meas[0] = e.p_meas[1] = np.nan
     if pr_ok:
         e.pd_filt += k.alpha_pressure * (e.pd_meas - e.pd_filt)
     return pr_ok
