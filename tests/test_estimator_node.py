@@ -199,7 +199,7 @@ def test_stale_marked_when_plant_stops(stack, ros_node):
     assert wait_for(lambda: stale_after_stop() > 100, 30), \
         f'estimator stopped publishing when the states stopped ({stale_after_stop()} stale)'
     with probe.lock:
-        after = [(t, e) for t, e in probe.estimates[-50:]]     # the plant long gone
+        after = probe.estimates[-50:]     # the plant long gone
         last_state = max(probe.states) if probe.states else 0
     print(f'{stale_after_stop()} stale estimates in {time.monotonic() - t_stop:.2f} s after '
           f'the plant stopped')

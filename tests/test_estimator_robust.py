@@ -93,15 +93,16 @@ def test_projection_bounds_and_offset_band(params):
     assert kf.project() == 1          # held on its bound: the model is at its edge
 
 
-def _predict_mode(est, p_a, p_b, omega):
-    """The check-valve state the chamber filter's next prediction takes from these priors."""
+def _predict_mode(est, p_a, p_b, omega, measured=(np.nan, np.nan)):
+    """The check-valve state the chamber filter's next prediction takes from these priors and
+    the ``measured`` chamber pressures (NaN: none)."""
     kf = est.kf
     kf.x[:] = 0.0
     kf.x[1] = kf.c.D_p * omega / kf.c.A_p          # the piston moving with the pump's flow
     kf.x[2], kf.x[3] = p_a, p_b
     kf.p_last[:2] = p_a, p_b
     est.omega_prev = omega
-    est._predict_tick(*est.kernel, omega)
+    est._predict_tick(*est.kernel, omega, *measured)
     return int(est.E['mode'][0])
 
 
@@ -122,12 +123,9 @@ def test_a_check_valve_passes_no_reverse_flow(params):
     # a measured pressure clearly below p_c (VALVE_GATE sigma of the sensor noise) says the
     # chamber sits on its valve, whatever the states predict; one within the gate does not
     sigma = np.sqrt(est.kf.R[1, 1])
-    est.E['p_meas'][0] = p_c - 3 * sigma, p_c - 3 * sigma
-    assert _predict_mode(est, near, near, pump) == 3
-    est.E['p_meas'][0] = p_c - 1 * sigma, p_c - 3 * sigma
-    assert _predict_mode(est, near, near, pump) == 1
-    est.E['p_meas'][0] = np.nan                           # no sample: the prediction decides
-    assert _predict_mode(est, near, near, pump) == 1
+    assert _predict_mode(est, near, near, pump, (p_c - 3 * sigma, p_c - 3 * sigma)) == 3
+    assert _predict_mode(est, near, near, pump, (p_c - 1 * sigma, p_c - 3 * sigma)) == 1
+    assert _predict_mode(est, near, near, pump) == 1      # no sample: the prediction decides
 
 
 def test_stiff_oil_sine_without_a_step_at_the_reversals():

@@ -177,7 +177,7 @@ class Estimator:
         # not typed again on every call: kernel_records.entry_point)
         kn = self.kernel
         self._estimate = entry_point(stepper.estimate, *kn, 0.0, 0.0, 0.0, 0.0)
-        self._predict_tick = entry_point(stepper.predict_tick, *kn, 0.0)
+        self._predict_tick = entry_point(stepper.predict_tick, *kn, 0.0, 0.0, 0.0)
         self._advance = entry_point(stepper.advance, *kn, 0.0, 0.0, 0.0)
         self._consistency = entry_point(stepper.consistency, *kn, 0.0)
         self.reset()
@@ -293,7 +293,7 @@ class Estimator:
         if ticks > 1:
             noise_level.gap(self.noise_s)
         for _ in range(min(max(int(ticks), 1), self.max_gap_ticks) - 1):
-            self._predict_tick(*self.kernel, self.omega_prev)
+            self._predict_tick(*self.kernel, self.omega_prev, math.nan, math.nan)
         fault_before = self.detector.code
         if pos_ok and not (self.isolate and fault_before in (fd.JUMP, fd.STUCK)):
             _, y, nis, m, _ = self._estimate(*self.kernel, position, w, pressure_a, pressure_b)
@@ -356,7 +356,7 @@ class Estimator:
                 self._saved = (self.kf.x.copy(), self.kf.P.copy(), self.omega_prev,
                                self.w_fric, None if p_last is None else p_last.copy(),
                                None if p_last is None else self.kf.fs.copy())
-            self._predict_tick(*self.kernel, self.omega_prev)
+            self._predict_tick(*self.kernel, self.omega_prev, math.nan, math.nan)
         noise_level.gap(self.noise_s)
         self.detector.tick_without_sample()
         return self._result(0.0, 0.0, True, 'stale', 0)

@@ -81,7 +81,6 @@ STATE = np.dtype([
     ('w_fric', 'f8'),           # low-passed pump speed: the friction sign of eq. 4.36
     ('edge', 'f8'),             # adaptive states on a bound after the last update
     ('p_last', 'f8', (4,)),     # chamber filter: adapt.pressure_increments' state
-    ('p_meas', 'f8', (2,)),     # chamber filter: this sample's measured p_A, p_B (NaN: none)
     ('clipped', 'f8', (1,)),    # chamber filter: updates in a row that clipped a parameter
     ('hold_weight', 'f8'),      # weight of b in the published position (:func:`published`)
     ('friction', 'f8', (adapt.NFS,)),           # adapt.friction_input's
@@ -172,7 +171,6 @@ def pack_filter(kf, k, e, model: bool, chambers: bool) -> Arrays:
     if chambers:
         c = kf.c
         k['p_c'], k['C_x'], k['C_r'], k['p_acc'], k['c_Ts'] = c.p_c, c.C_x, c.C_r, c.p_acc, kf.c_Ts
-        e['p_meas'] = np.nan
         for name in ('i_leakage', 'leakage_range', 'i_displacement', 'displacement_range',
                      'i_compliance', 'compliance_range', 'i_friction', 'friction_range',
                      'i_external_leakage', 'external_leakage_range', 'i_gm', 'offset_bound',
@@ -230,7 +228,7 @@ def predict_given(K, E, a, omega, w_friction, use_p, p_D) -> None:
     e.w_fric = w_friction
     k.use_pressure = use_p
     e.pd_filt = p_D
-    predict_tick(K, E, a, omega)
+    predict_tick(K, E, a, omega, np.nan, np.nan)
 
 
 @njit(cache=True)
@@ -259,7 +257,7 @@ def pressure_ok(k, pa, pb) -> bool:
 
 
 @njit(cache=True)
-def valve_state(k, e, R, Fm, Gm, n, col0, x, u, omega) -> int:
+def valve_state(k, e, R, Fm, Gm, n, col0, x, u, omega, pa, pb) -> int:
     """The chamber filter's check-valve state for this tick, 2 s_A + s_B (index into the
     stacked Fm, Gm). A valve is open while its chamber's prior pressure is below p_c (where the
     valve's linear flow is an inflow), unless the tick's flows would lift the chamber above p_c
@@ -267,11 +265,11 @@ def valve_state(k, e, R, Fm, Gm, n, col0, x, u, omega) -> int:
     conductance would hand the pump's flow back to the accumulator for as long as the prior
     sat below p_c (at a reversal the filling chamber lost 30 um of piston travel on a stiff
     oil, beta x1.4). That prediction is the filter's own; where this sample's measured pressure
-    (e.p_meas; NaN: none) is below p_c by :data:`VALVE_GATE` sigma of its noise (R), the
+    (pa, pb; NaN: none) is below p_c by :data:`VALVE_GATE` sigma of its noise (R), the
     chamber is on its valve whatever the states predict, and it stays open."""
     s_a, s_b = x[2] < k.p_c, x[3] < k.p_c
-    on_a = e.p_meas[0] < k.p_c - VALVE_GATE * math.sqrt(R[1, 1])
-    on_b = e.p_meas[1] < k.p_c - VALVE_GATE * math.sqrt(R[2, 2])
+    on_a = pa < k.p_c - VALVE_GATE * math.sqrt(R[1, 1])
+    on_b = pb < k.p_c - VALVE_GATE * math.sqrt(R[2, 2])
     if s_a and not on_a and shut_pressure(k, e, Fm, Gm, n, col0, s_b, 2, x, u, omega) >= k.p_c:
         s_a = False
     if s_b and not on_b and shut_pressure(k, e, Fm, Gm, n, col0, 2 * s_a, 3, x, u,
@@ -303,12 +301,13 @@ def shut_pressure(k, e, Fm, Gm, n, col0, mode, row, x, u, omega) -> float:
 
 
 @njit(cache=True)
-def predict_tick(K, E, a, w):
+def predict_tick(K, E, a, w, pa, pb):
     """One prediction over Ts with the motor speed averaged over the period (its previous
     value and ``w``): the model's inputs (eq. 4.36 friction, or the chamber filter's Stribeck
     curve, its check-valve state, friction and parameter columns), then eq. 4.1-4.2 (with the
     leakage Jacobian when lambda is a state). Chamber filter: (F, G) of the check-valve state
-    are copied from the stacked Fm, Gm. ``a``: the :class:`Arrays`."""
+    (:func:`valve_state`, with this sample's measured ``pa``, ``pb``; NaN: none) are copied
+    from the stacked Fm, Gm. ``a``: the :class:`Arrays`."""
     k, e = K[0], E[0]
     x, P, F, G, u, Q, tmp, g_leak, ws, Fm, Gm = (a.x, a.P, a.F, a.G, a.u, a.Q, a.tmp,
                                                  a.g_leak, a.ws, a.Fm, a.Gm)
@@ -326,7 +325,7 @@ def predict_tick(K, E, a, w):
             u[1] = friction_estimate(e.w_fric, pd, k.friction_pressure > 0.5, k.A_p, k.D_p,
                                      k.F_s, k.v_eps)
         n = x.shape[0]
-        mode = valve_state(k, e, a.R, Fm, Gm, n, G.shape[1], x, u, omega)
+        mode = valve_state(k, e, a.R, Fm, Gm, n, G.shape[1], x, u, omega, pa, pb)
         e.mode = mode
         for i in range(n):
             for j in range(n):
@@ -365,14 +364,16 @@ def predict_tick(K, E, a, w):
 @njit(cache=True)
 def advance(K, E, a, w, pa, pb) -> bool:
     """A sample's prediction: its p_D (when the pressures are valid), :func:`predict_tick`
-    with ``w``, the p_D low-pass. Returns whether the pressures are valid."""
+    with ``w`` (and the pressures, when valid and used), the p_D low-pass. Returns whether the
+    pressures are valid."""
     k, e = K[0], E[0]
     pr_ok = pressure_ok(k, pa, pb)
     if pr_ok:
         e.pd_meas = pa - pb
-    e.p_meas[0], e.p_meas[1] = (pa, pb) if pr_ok and k.use_pressure > 0.5 else (np.nan, np.nan)
-    predict_tick(K, E, a, w)
-    e.p_meas[0] = e.p_meas[1] = np.nan
+    if pr_ok and k.use_pressure > 0.5:
+        predict_tick(K, E, a, w, pa, pb)
+    else:
+        predict_tick(K, E, a, w, np.nan, np.nan)
     if pr_ok:
         e.pd_filt += k.alpha_pressure * (e.pd_meas - e.pd_filt)
     return pr_ok
