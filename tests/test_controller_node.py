@@ -33,6 +33,7 @@ class FakeEstimator(probes.Probe):
         self.ref_pub = node.create_publisher(PositionReference, '/eha/reference', 10)
         self.commands = self.received(ActuatorCommand, '/eha/command', 1000)
         self.seq, self.position, self.stale, self.running = 0, 0.0, False, True
+        self.leak_flow = 0.0
         self.paused = False
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
@@ -45,7 +46,8 @@ class FakeEstimator(probes.Probe):
         while self.running:
             if not self.paused:
                 self.seq += 1
-                self.pub.publish(self.Est(seq=self.seq, position=self.position, stale=self.stale))
+                self.pub.publish(self.Est(seq=self.seq, position=self.position, stale=self.stale,
+                                          leak_flow=self.leak_flow))
             time.sleep(0.001)
 
     def close(self):
@@ -79,6 +81,32 @@ def test_one_command_per_estimate_with_same_seq(ctl):
     assert len(cmd_seqs) == len(set(cmd_seqs)), 'more than one command for an estimate'
     # piston held at 0 with a 2 mm reference: the controller drives positive, clamped
     assert ctl.commands[-1].motor_speed_ref > 0
+
+
+def test_the_leakage_compensation_supplies_the_estimated_leak_flow(ros_node):
+    """control.leakage_compensation = 1 over DDS: the piston held at its reference, each
+    command is the pump speed q_L / D_p that supplies the estimate's leak_flow (50 rad/s
+    here, within the drive's reach, so G stays at rest); a NaN leak flow adds nothing."""
+    from eha_ros.core.sim.batch import node_params
+    from eha_ros.core.controller.params import SCHEMA
+    D_p = node_params('controller', SCHEMA)['plant.pump.D_p']
+    proc = start_process(controller_cmd('-p', 'control.leakage_compensation:=1.0'))
+    est = FakeEstimator(ros_node)
+    try:
+        est.leak_flow = 50.0 * D_p
+        assert wait_for(lambda: len(est.commands) > 200, 60), 'controller does not answer'
+        seq = est.seq
+        assert wait_for(lambda: est.commands[-1].seq > seq + 50, 10)
+        assert [c.motor_speed_ref for c in est.commands if c.seq > seq] == \
+            pytest.approx([50.0] * len([c for c in est.commands if c.seq > seq]), rel=1e-12)
+        est.leak_flow = float('nan')
+        seq = est.seq
+        assert wait_for(lambda: est.commands[-1].seq > seq + 50, 10)
+        assert all(c.motor_speed_ref == 0.0 for c in est.commands if c.seq > seq + 5)
+    finally:
+        est.close()
+        code, out, err = stop_process(proc)
+        assert 'Traceback' not in err, err
 
 
 def test_watchdog_zero_speed_and_bumpless_recovery(ctl):

@@ -467,3 +467,32 @@ def test_chamber_model_follows_the_nonlinear_plant_where_eq_4_35_drifts(params):
           f'eq. 4.35 {e_35 * 1e6:.1f} um')
     assert e_ch < 10e-6
     assert e_35 > 3 * e_ch
+
+
+def test_the_leak_flow_is_what_a_held_load_costs_the_pump(params):
+    """EstimateResult.leak_flow (adapt.leak_flow; /eha/estimate leak_flow, the controller's
+    leakage compensation supplies it): with the nominal leakage (lambda = epsilon = 0) and the
+    unloaded chamber on its check valve, the flow per pressure difference is the loaded
+    leakage C_p + C_c + C_r of core.sim.linear.operating_leakage (issue 42, decision 3), less
+    the check valve's cracking pressure on C_r; it changes sign with the load, follows the
+    adapted leakage, and is NaN for the filters without chamber pressures."""
+    from eha_ros.core.sim import linear
+    est = Estimator(params)
+    kf = est.kf
+    p = PlantParams.from_dict(params)
+    crack = params['plant.valves.check_crack']
+    p_lo = kf.c.p_acc - crack
+    for sign in (1.0, -1.0):
+        dp = sign * 5e3 / p.A_p
+        kf.x[2], kf.x[3] = (p_lo + dp, p_lo) if sign > 0 else (p_lo, p_lo - dp)
+        q = est._result(0.0, 0.0, False, '', 1).leak_flow
+        want = linear.operating_leakage(params, 5e3) * dp - sign * p.C_r * crack
+        assert q == pytest.approx(want, rel=1e-9)
+    kf.x[kf.i_leakage], kf.x[kf.i_external_leakage] = 1.0, 3.0       # x2 C_x, x4 C_r
+    q2 = est._result(0.0, 0.0, False, '', 1).leak_flow
+    assert q2 == pytest.approx(-(2 * (p.C_p + p.C_c) * abs(dp) + 4 * p.C_r * (abs(dp) - crack)),
+                               rel=1e-9)
+    for structure, filt in (('eq4_35', 'model'), ('chambers', 'pva')):
+        other = Estimator(dict(params, **{'estimator.model.structure': structure,
+                                          'estimator.filter': filt}))
+        assert math.isnan(other._result(0.0, 0.0, False, '', 1).leak_flow)

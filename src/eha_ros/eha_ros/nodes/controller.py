@@ -250,7 +250,7 @@ class Controller(LifecycleNodeMixin):
                     f'resumed from the piston position')
                 self.tripped, self.safe = False, None
                 self.ctl.start(msg.position)       # bumpless: zero output, reference ramps
-            out = self.ctl.update(msg.position, msg.motor_speed)
+            out = self.ctl.update(msg.position, msg.motor_speed, msg.leak_flow)
             speed, saturated = out.speed_ref, out.saturated
         elif self.tripped or self.last_good is None:
             speed, saturated = 0.0, False

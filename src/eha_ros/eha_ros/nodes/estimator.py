@@ -138,6 +138,7 @@ class EstimatorNode:
         m.seq = int(seq)
         m.position, m.velocity = r.position, r.velocity
         m.pressure_diff, m.position_variance = r.pressure_diff, r.position_variance
+        m.leak_flow = r.leak_flow
         m.innovation, m.nis = r.innovation, r.nis
         m.motor_speed = r.motor_speed
         m.stale, m.update_skipped = stale, r.update_skipped

@@ -77,8 +77,10 @@ class PIDLoop:
     def request(self, reference: float) -> None:
         self.reference = reference
 
-    def update(self, position: float, motor_speed: float = 0.0) -> 'PIDLoop.Output':
-        """One sample on the error reference - position (the motor speed is not used)."""
+    def update(self, position: float, motor_speed: float = 0.0,
+               leak_flow: float = 0.0) -> 'PIDLoop.Output':
+        """One sample on the error reference - position (the motor speed and the leak flow
+        are not used)."""
         return self.Output(self.pid.update(self.reference - position))
 
     def start(self, position: float) -> None:

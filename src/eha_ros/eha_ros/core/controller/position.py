@@ -8,6 +8,7 @@ One call per estimate::
     e = r_f - x_hat -> G (state x, observer-form anti-windup) -> u -> u_s = clip(u, +-omega_max)
     motor speed omega_m -> the drive's reach (antiwindup.drive_reach) bounds the anti-windup's
     actuator u_a = clip(u_s, omega_m -+ reach)
+    estimated leak flow q_L -> optional leakage compensation: u += alpha q_L / D_p before the clamp
 
 G is realised as one state space (a cascade of real first- and second-order sections,
 controller.lti) of any proper G(s); nothing assumes its structure. The per-tick arithmetic is
@@ -66,12 +67,15 @@ class PositionController:
     aw_poles: continuous-time poles (rad/s, one per state of G, conjugate pairs) of the
     controller while clamped (antiwindup.observer_gain); None or antiwindup False: L = 0.
     drive_reach: how far (rad/s) the reference may lead the motor speed given to
-    :meth:`update` (antiwindup.drive_reach); 0: the clamp is the only actuator limit."""
+    :meth:`update` (antiwindup.drive_reach); 0: the clamp is the only actuator limit.
+    leakage_gain: alpha / D_p (rad/s per m^3/s), the motor speed added per m^3/s of the leak
+    flow given to :meth:`update` (stepper.control); 0: off."""
 
     def __init__(self, G, F, Ts: float, omega_max: float, stroke: float, margin: float,
                  rate_limit: float, antiwindup: bool = True, aw_poles=None,
                  prewarp_w: float | None = None, counters: Counters | None = None,
-                 accel_limit: float = 0.0, drive_reach: float = 0.0):
+                 accel_limit: float = 0.0, drive_reach: float = 0.0,
+                 leakage_gain: float = 0.0):
         self.Ts = Ts
         self.omega_max = omega_max
         self.c = counters if counters is not None else Counters()
@@ -93,8 +97,13 @@ class PositionController:
             raise ValueError(f'drive reach {drive_reach}: expected a finite value >= 0 rad/s')
         self.k[S.K_WMAX], self.k[S.K_FDD], self.k[S.K_GDD] = omega_max, self.F._dd, self.G._dd
         self.k[S.K_REACH] = drive_reach if self.antiwindup else 0.0
+        if not (leakage_gain >= 0.0 and math.isfinite(leakage_gain)):
+            raise ValueError(f'leakage compensation gain {leakage_gain}: expected a finite '
+                             f'value >= 0 (rad/s)/(m^3/s)')
+        self.k[S.K_LEAK] = leakage_gain
         self._arrays = S.pack(self)[2]     # F, G and L arrays: changed in place, never replaced
-        self._control = entry_point(S.control, self.k, self.s, self._arrays, 0.0, 0.0)  # per tick
+        self._control = entry_point(S.control, self.k, self.s, self._arrays, 0.0, 0.0,
+                                    0.0)   # per tick
 
     @classmethod
     def from_params(cls, p: dict, counters: Counters | None = None) -> 'PositionController':
@@ -107,7 +116,8 @@ class PositionController:
                    p['plant.drive.omega_max'], p['plant.cylinder.stroke'],
                    p['control.stroke_margin'], p['control.rate_limit'], p['control.antiwindup'],
                    aw_poles=poles, prewarp_w=prewarp, counters=counters,
-                   accel_limit=p['control.accel_limit'], drive_reach=reach)
+                   accel_limit=p['control.accel_limit'], drive_reach=reach,
+                   leakage_gain=p['control.leakage_compensation'] / p['plant.pump.D_p'])
 
     def request(self, position: float) -> bool:
         return self.ref.request(position)
@@ -138,13 +148,15 @@ class PositionController:
         over."""
         self.s[S.C_HOLD] = max(self.s[S.C_HOLD], ticks)
 
-    def update(self, position_estimate: float, motor_speed: float = math.nan) -> ControlOutput:
-        """One tick: the position estimate (m) and the active motor's measured speed (rad/s;
-        NaN when unknown: the clamp is the only actuator limit)."""
+    def update(self, position_estimate: float, motor_speed: float = math.nan,
+               leak_flow: float = math.nan) -> ControlOutput:
+        """One tick: the position estimate (m), the active motor's measured speed (rad/s;
+        NaN when unknown: the clamp is the only actuator limit) and the estimated leak flow
+        (m^3/s; NaN: no leakage compensation this tick)."""
         if not self.started:
             self.start(position_estimate)
         u_sat = self._control(self.k, self.s, self._arrays, float(position_estimate),
-                              float(motor_speed))
+                              float(motor_speed), float(leak_flow))
         S.unpack(self, self.s)
         s = self.s
         return ControlOutput(float(u_sat), bool(s[S.C_CLAMPED]), float(s[S.C_R]),

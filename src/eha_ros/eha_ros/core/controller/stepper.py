@@ -22,9 +22,10 @@ from .discrete import ss_advance, ss_output, ss_step
 
 drop_stale(__file__)
 
-# constants; K_REACH: the drive's reach (rad/s) beyond the measured motor speed (0: not used)
-K_LIMIT, K_STEP, K_WMAX, K_FDD, K_GDD, K_VMAX, K_ACCEL, K_TS, K_REACH = range(9)
-NK = 9
+# constants; K_REACH: the drive's reach (rad/s) beyond the measured motor speed (0: not used);
+# K_LEAK: the leakage compensation's gain alpha / D_p (rad/s per m^3/s of leak flow; 0: off)
+K_LIMIT, K_STEP, K_WMAX, K_FDD, K_GDD, K_VMAX, K_ACCEL, K_TS, K_REACH, K_LEAK = range(10)
+NK = 10
 # state; C_R, C_E, C_U: the last tick's prefiltered reference, error, unclamped output;
 # C_N_REACH: ticks the drive's reach bounded the anti-windup's actuator
 (C_TARGET, C_VALUE, C_STARTED, C_CLAMPED, C_HOLD, C_N_SAT, C_N_CLAMPREF, C_RATE,
@@ -115,11 +116,11 @@ def shape(k, c) -> float:
 
 
 @njit(cache=True)
-def control(k, c, a, x_hat, motor_speed):
-    """PositionController.update(x_hat, motor_speed) of a started controller; returns the
-    clamped speed.
+def control(k, c, a, x_hat, motor_speed, q_leak):
+    """PositionController.update(x_hat, motor_speed, q_leak) of a started controller; returns
+    the clamped speed.
 
-    u[k] = C x[k] + D e[k],  u_s[k] = clip(u[k], +-omega_max)
+    u[k] = C x[k] + D e[k] + alpha q_L[k] / D_p,  u_s[k] = clip(u[k], +-omega_max)
     u_a[k] = clip(u_s[k], omega_m[k] -+ reach)          (what the drive can make of u_s)
     x[k+1] = A x[k] + B e[k] + L (u_a[k] - u[k])       (observer form, core.controller.antiwindup)
     Unclamped and within the drive's reach, L (u_a - u) = 0: exactly Tustin(G). The motor
@@ -127,11 +128,16 @@ def control(k, c, a, x_hat, motor_speed):
     drive's current limit lets the motor follow a reference at most ``reach`` ahead of it
     (antiwindup.drive_reach), so a piston held, or a motor starting from rest, does not wind
     up G. A NaN speed or reach 0: the clamp only. During an integrator hold (channel switch)
-    x is frozen and the output follows e through D only. ``a``: the :class:`Arrays`."""
+    x is frozen and the output follows e through D only. alpha q_L / D_p: the leakage
+    compensation, the pump speed that supplies the fraction alpha of the leak flow q_L the
+    estimator reports (core.estimator.adapt.leak_flow), at once, where G would wait for the
+    position error the leak causes (a NaN q_L adds nothing). ``a``: the :class:`Arrays`."""
     Fa, Fb, Fc, Fx, Ft, Ga, Gb, Gc, Gl, Gx, Gt = a
     r = ss_step(Fa, Fb, Fc, k[K_FDD], Fx, shape(k, c), Ft)
     e = r - x_hat
     u = ss_output(Gc, k[K_GDD], Gx, e)
+    if k[K_LEAK] != 0.0 and math.isfinite(q_leak):
+        u += k[K_LEAK] * q_leak             # D_p omega = alpha q_L
     wmax = k[K_WMAX]
     m = u if u < wmax else wmax                          # min(omega_max, u)
     u_sat = m if m > -wmax else -wmax                    # max(-omega_max, .)

@@ -150,14 +150,27 @@ def parameter_flows(x, i_lam, i_del, i_kap, i_eps, pa, pb, dpa, dpb, omega, C_x,
 
 
 @njit(cache=True)
+def leak_flow(x, i_lam, i_eps, C_x, C_r, p_acc) -> float:
+    """The flow the loaded chamber loses (m^3/s, signed as p_D = p_A - p_B): q_L = (1 + lambda)
+    C_x p_D + (1 + epsilon) C_r (p_hi - p_acc) sign(p_D), with the filter's pressures and
+    leakage states (lambda for epsilon when epsilon is not a state). The low chamber sits on
+    its check valve (Fig. 3.12), so the loaded side loses its whole per-port leakage C_r, not
+    C_r/2 as in eq. 3.22's C_eq: what the pump must supply to hold a load."""
+    lam = x[i_lam] if i_lam >= 0 else 0.0
+    eps = x[i_eps] if i_eps >= 0 else lam
+    pd = x[2] - x[3]
+    p_hi = x[2] if pd >= 0.0 else x[3]
+    return ((1.0 + lam) * C_x * pd
+            + (1.0 + eps) * C_r * (p_hi - p_acc) * (1.0 if pd >= 0.0 else -1.0))
+
+
+@njit(cache=True)
 def friction_input(fk, fs, x, omega) -> float:
     """Piston friction of the filter's mechanical row: the plant's Stribeck curve (eq. 3.33,
     Table 3.7, without its viscous part mu v, which is the row's b) at the pump-flow velocity
     v_f = (D_p (1 + delta) omega - q_L) / A_p, the flow balance of the high-pressure chamber
-    without its compliance flow, q_L = (1 + lambda) C_x (p_A - p_B) + (1 + epsilon) C_r
-    (p_hi - p_acc) (the low chamber sits on its check valve, Fig. 3.12: the whole per-port
-    leakage C_r of the loaded side is lost, not C_r/2 as in eq. 3.22's C_eq; 14 mm/s of
-    difference at C_eq x10 under 5 kN), prior states, low-passed (fk[FK_ALPHA] per tick:
+    without its compliance flow, q_L its :func:`leak_flow` (14 mm/s more than eq. 3.22's C_eq
+    would say at C_eq x10 under 5 kN), prior states, low-passed (fk[FK_ALPHA] per tick:
     command chatter must not flip it). Returns the nominal force input F_L = -F(v_f); fs[FS_F]
     keeps F(v_f) for the friction-scale column (:func:`friction_column`).
 
@@ -187,14 +200,9 @@ def friction_input(fk, fs, x, omega) -> float:
     tuning seeds 1, 3, 5: phi +0.5..+0.9 after 0.3 s, and filter_sensor_disagree at 0.8 s on
     seed 3). phi is still not observable there: once v_f leaves the band (the leakage states
     still learning) it wanders, to -0.7..-0.9 on those seeds."""
-    il, ie, idl = int(fk[FK_ILAM]), int(fk[FK_IEPS]), int(fk[FK_IDEL])
-    lam = x[il] if il >= 0 else 0.0
+    idl = int(fk[FK_IDEL])
     dlt = x[idl] if idl >= 0 else 0.0
-    pd = x[2] - x[3]
-    p_hi = x[2] if pd >= 0.0 else x[3]
-    eps = x[ie] if ie >= 0 else lam
-    q_l = ((1.0 + lam) * fk[FK_CX] * pd
-           + (1.0 + eps) * fk[FK_CR] * (p_hi - fk[FK_PACC]) * (1.0 if pd >= 0.0 else -1.0))
+    q_l = leak_flow(x, int(fk[FK_ILAM]), int(fk[FK_IEPS]), fk[FK_CX], fk[FK_CR], fk[FK_PACC])
     v = (fk[FK_DP] * (1.0 + dlt) * omega - q_l) / fk[FK_AP]
     fs[FS_V] += fk[FK_ALPHA] * (v - fs[FS_V])
     fs[FS_N] = fs[FS_N] + 1.0 if abs(fs[FS_V]) < fk[FK_VREST] else 0.0

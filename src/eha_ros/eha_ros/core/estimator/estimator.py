@@ -54,6 +54,7 @@ class EstimateResult:
     nis_dim: int = 0               # measurement dimension behind nis (0: no update)
     consistency: int = 0           # adapt.OK / MODEL / SENSOR / DISAGREE (adapt.VERDICTS)
     motor_speed: float = math.nan  # the model's input: the active motor's speed (rad/s)
+    leak_flow: float = math.nan    # the flow the loaded chamber leaks (m^3/s, stepper.leak_flow)
 
 
 def build_filter(p: dict):
@@ -168,6 +169,7 @@ class Estimator:
         self.kernel = stepper.pack(self)
         self.E = E = self.kernel[1]
         self.i_gm = int(self.kernel[0]['i_gm'][0])
+        self._leak_flow = entry_point(stepper.leak_flow, self.kernel[0], self.kf.x)
         self.detector.s, self.monitor_s = E['detector'][0], E['monitor'][0]
         self.noise_s, self.flow_s, self.load_s = E['noise'][0], E['flow'][0], E['load'][0]
         if self.chambers:
@@ -367,7 +369,8 @@ class Estimator:
         return EstimateResult(stepper.published(self.E, kf.x, self.i_gm),
                               kf.velocity, pd, kf.position_variance, innovation,
                               nis, skipped, self.detector.code, rejected, m, self.consistency,
-                              self.omega_prev if self.started else math.nan)
+                              self.omega_prev if self.started else math.nan,
+                              self._leak_flow(self.kernel[0], kf.x))
 
     @property
     def friction_alphas(self):

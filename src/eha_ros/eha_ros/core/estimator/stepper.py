@@ -457,6 +457,17 @@ def estimate(K, E, a, position, w, pa, pb):
 
 
 @njit(cache=True)
+def leak_flow(K, x) -> float:
+    """The estimate's leak flow (adapt.leak_flow; m^3/s): the chamber filter's, NaN for the
+    filters without chamber pressures (eq. 4.35, PVA)."""
+    k = K[0]
+    if k.chambers < 0.5:
+        return math.nan
+    return adapt.leak_flow(x, int(k.i_leakage), int(k.i_external_leakage), k.C_x, k.C_r,
+                           k.p_acc)
+
+
+@njit(cache=True)
 def published(E, x, i_gm) -> float:
     """The position the estimate publishes: x_hat, and at rest under a held load (blended in
     and out) x_hat + b, the sensor's reading without its white noise."""

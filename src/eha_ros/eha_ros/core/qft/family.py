@@ -19,7 +19,7 @@ from .freqresp import feedback, pad, ss_freqresp
 from ..controller.lti import Zpk, pade_delay
 
 NAMES = ('C_eq', 'D_p', 'beta', 'k_T', 'k_E')
-I_W, I_X, I_V = 1, 2, 3          # state indices of omega, x, xdot in eq. 3.35
+I_W, I_X, I_V, I_P = 1, 2, 3, 4  # state indices of omega, x, xdot, p_D in eq. 3.35
 
 
 def scaled_params(base: dict, scale) -> dict:
@@ -106,18 +106,33 @@ class CascadePlants:
     C_x: np.ndarray          # (n,)       position output
     C_w: np.ndarray          # (n,)       motor speed output
     delay: float = 0.0       # position-loop delay T_d [s] on omega_ref (not in A)
+    C_p: np.ndarray | None = None   # (n,)  load pressure p_D output
+    leak_gain: float = 0.0   # K_c (rad/s per Pa): omega_ref += K_c p_D, delayed as omega_ref
+
+    def _pressure_loop(self, w):
+        """(1 - K_c P_pw, P_pd) of a fixed leakage compensation omega_ref += K_c p_D (the
+        controller's, core.controller.stepper.control, with its leakage estimate frozen):
+        P_pw = p_D/omega_ref with the delay, P_pd = p_D/F_L."""
+        e = np.exp(-1j * w * self.delay)[None]
+        return (1.0 - self.leak_gain * ss_freqresp(self.A, self.B_ref, self.C_p, w) * e,
+                ss_freqresp(self.A, self.B_load, self.C_p, w))
 
     def P_omega(self, w):
-        """x/omega_ref (eq. 3.42 with the designed G_v) times e^{-j w T_d}, (N+1, F)."""
+        """x/omega_ref (eq. 3.42 with the designed G_v) times e^{-j w T_d}, (N+1, F); with
+        the leakage compensation x/v of omega_ref = v + K_c p_D: P_w / (1 - K_c P_pw)."""
         w = np.atleast_1d(np.asarray(w, float))
-        return ss_freqresp(self.A, self.B_ref, self.C_x, w) * np.exp(-1j * w * self.delay)[None]
+        P = ss_freqresp(self.A, self.B_ref, self.C_x, w) * np.exp(-1j * w * self.delay)[None]
+        if self.leak_gain:
+            P = P / self._pressure_loop(w)[0]
+        return P
 
     def delayed_ss(self, order: int = 4):
         """(A, B_ref, C_x) with a Pade approximant of the delay at the omega_ref input
         (for closed-loop eigenvalues; frequency responses use the exact e^{-j w T_d})."""
-        if self.delay <= 0:
+        if self.delay <= 0 and not self.leak_gain:
             return self.A, self.B_ref, np.broadcast_to(self.C_x, self.A.shape[:2])
-        Ad, Bd, Cd, Dd = pade_delay(self.delay, order).ss()
+        Ad, Bd, Cd, Dd = pade_delay(self.delay, order).ss() if self.delay > 0 else (
+            np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.ones((1, 1)))
         N, n, _ = self.A.shape
         m = Ad.shape[0]
         A = np.zeros((N, n + m, n + m))
@@ -125,22 +140,32 @@ class CascadePlants:
         A[:, :n, n:] = self.B_ref[:, :, None] * Cd[0][None, None, :]
         A[:, n:, n:] = Ad
         B = np.concatenate([self.B_ref * Dd[0, 0], np.broadcast_to(Bd[:, 0], (N, m))], axis=1)
+        if self.leak_gain:          # the delay's input is v + K_c p_D
+            A[:, :, :n] += self.leak_gain * B[:, :, None] * self.C_p[None, None, :n]
         return A, B, np.broadcast_to(pad(self.C_x, m), (N, n + m))
 
     def P_d(self, w):
-        """x/F_L of the same closed velocity loop, (N+1, F)."""
-        return ss_freqresp(self.A, self.B_load, self.C_x, w)
+        """x/F_L of the same closed velocity loop, (N+1, F); with the leakage compensation
+        P_d + P_w K_c P_pd / (1 - K_c P_pw)."""
+        P = ss_freqresp(self.A, self.B_load, self.C_x, w)
+        if self.leak_gain:
+            w = np.atleast_1d(np.asarray(w, float))
+            P = P + self.P_omega(w) * self.leak_gain * self._pressure_loop(w)[1]
+        return P
 
 
-def velocity_loop_plants(fam: TorqueFamily, Gv: Zpk, delay: float = 0.0) -> CascadePlants:
+def velocity_loop_plants(fam: TorqueFamily, Gv: Zpk, delay: float = 0.0,
+                         leak_gain: float = 0.0) -> CascadePlants:
     """Close each plant's velocity loop (speed feedback, i_ref = G_v (omega_ref - omega));
-    delay: position-loop delay T_d [s] carried by P_omega."""
+    delay: position-loop delay T_d [s] carried by P_omega; leak_gain: a fixed leakage
+    compensation K_c (CascadePlants)."""
     A, B, BL = fam.all_A()
     n = A.shape[1]
     Cw = np.broadcast_to(C_row(I_W, n), (A.shape[0], n))
     Acl, Br, (Bl,) = feedback(A, B, Cw, Gv.ss(), extra_B=(BL,))
     m = Acl.shape[1] - n
-    return CascadePlants(Acl, Br, Bl, pad(C_row(I_X, n), m), pad(C_row(I_W, n), m), float(delay))
+    return CascadePlants(Acl, Br, Bl, pad(C_row(I_X, n), m), pad(C_row(I_W, n), m), float(delay),
+                         pad(C_row(I_P, n), m), float(leak_gain))
 
 
 def torque_responses(fam: TorqueFamily, w):

@@ -195,11 +195,12 @@ class BatchLoop:
             x_hat, nis, innov = r.position, r.nis, r.innovation
             code, nd, v_hat, skipped = r.sensor_fault, r.nis_dim, r.velocity, r.update_skipped
             est_ok = r.nis_dim > 0 and not r.sensor_fault
-            verdict, w_act = r.consistency, r.motor_speed
+            verdict, w_act, q_leak = r.consistency, r.motor_speed, r.leak_flow
         else:
             x_hat, nis, est_ok, innov, code, nd = m.position, math.nan, False, math.nan, 0, 0
             v_hat, skipped = math.nan, False
             verdict, w_act = 0, float(m.motor_speed[m.active_channel])
+            q_leak = math.nan
             if self.on_truth:
                 x_hat = x0
         ctl.request(reference)
@@ -225,7 +226,7 @@ class BatchLoop:
             if self.holding:
                 self.holding = False
                 ctl.start(x_hat)                # bumpless, as the controller node
-            u = ctl.update(x_hat, w_act).speed_ref
+            u = ctl.update(x_hat, w_act, q_leak).speed_ref
         plant.step(u, load)
         self.u = u
         if mgr is not None:

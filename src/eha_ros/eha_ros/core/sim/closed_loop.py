@@ -190,7 +190,8 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
                               fault, innov, nd > 0 and code == 0, steady, age, cmd)
         un = math.nan
         if ok:
-            un = CS.control(ck, cc, ca, x_hat, w_act)
+            un = CS.control(ck, cc, ca, x_hat, w_act,
+                            ES.leak_flow(ek, x) if has_est else math.nan)
         if not math.isfinite(un):
             _copy(keep[0], x); _copy(keep[1], Pe); _copy(keep[2], ee); _copy(keep[3], cc)  # noqa
             _copy(keep[4], Fx); _copy(keep[5], Gx); _copy(keep[6], ms); _copy(keep[7], hs)  # noqa

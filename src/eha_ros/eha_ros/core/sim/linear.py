@@ -5,7 +5,10 @@ qft.family) under its own closed velocity loop G_v (the drive gains plant.drive.
 lowpass_w of eq. 4.65), the position controller G and prefilter F of the controller YAML,
 and the loop delay T_d = 1.5 Ts + plant.drive.delay on the speed reference (as in
 scripts/design_qft). The position is fed back without error (no estimator), friction is the
-viscous b of eq. 3.23 only.
+viscous b of eq. 3.23 only, and the controller's leakage compensation, which supplies the
+estimator's leak flow, is not part of it: these are the QFT loop's figures. ``cascade``'s
+``leak_gain`` closes a fixed compensation omega_ref += K_c p_D through the same delay
+(qft.family.CascadePlants), for the compensation's stability over the family.
 
 - tracking x/r = F P G/(1 + P G) with P = P_omega e^{-s T_d}: gain (dB) and phase (deg,
   wrapped to (-180, 180] as core.sweep.analysis.sine_point reports it) per frequency;
@@ -107,9 +110,11 @@ def loaded_C_eq(base: dict, rows: dict, load: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ models
-def cascade(scales, plant: dict, Gv: Zpk, delay: float, drive_kT: str = 'plant'):
+def cascade(scales, plant: dict, Gv: Zpk, delay: float, drive_kT: str = 'plant',
+            leak_gain: float = 0.0):
     """qft.family.CascadePlants of the variants (rows of ``scales``, nominal plant.yaml
-    appended last): each torque-mode plant under its own closed velocity loop G_v.
+    appended last): each torque-mode plant under its own closed velocity loop G_v, with a fixed
+    leakage compensation omega_ref += ``leak_gain`` p_D (rad/s per Pa; 0: none).
 
     drive_kT='plant': the drive's 1/k_T follows the variant (as the nonlinear drive);
     'nominal': G_v's 1/k_T stays nominal (the QFT design's family)."""
@@ -132,7 +137,7 @@ def cascade(scales, plant: dict, Gv: Zpk, delay: float, drive_kT: str = 'plant')
     fam = qf.TorqueFamily(uniq, A, B, BL, A0, B0, BL0, float(p0['plant.motor.k_T']),
                           p0['plant.pump.D_p'] / p0['plant.cylinder.A_p'],
                           float(p0['plant.drive.delay']))
-    casc = qf.velocity_loop_plants(fam, Gv, delay)
+    casc = qf.velocity_loop_plants(fam, Gv, delay, leak_gain)
     return casc, np.asarray(inv).reshape(-1)
 
 

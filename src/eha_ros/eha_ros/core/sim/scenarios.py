@@ -346,9 +346,10 @@ def _fhz(f: float) -> str:
 
 
 def step_figures(s, p, Ts):
-    """Overshoot (% of the step), 2 % settling time and steady error of the truth; beside it
-    the steady error of what the sensor reports without its white noise (truth + its
-    Gauss-Markov offset: the load step's measure, issue 42), not a spec here."""
+    """Overshoot (% of the step), 2 % settling time, steady error and steady ripple (peak to
+    peak over the steady window: a loop hunting at rest) of the truth; beside them the steady
+    error of what the sensor reports without its white noise (truth + its Gauss-Markov
+    offset: the load step's measure, issue 42), not a spec here."""
     t, x, a = s['t'], s['truth'], p['amplitude']
     after = t >= p['t_step'] - 1e-9
     y, ta = x[after], t[after] - p['t_step']
@@ -357,6 +358,7 @@ def step_figures(s, p, Ts):
     out = {'overshoot_pct': float(max(0.0, np.max((y - a) * np.sign(a))) / abs(a) * 100.0),
            'settling_s': float(ta[outside[-1]] + Ts) if len(outside) else 0.0,
            'steady_error_m': float(abs(np.mean(y[win]) - a)),
+           'steady_ripple_m': float(np.ptp(y[win])),
            'estimate_error_m': float(abs(np.mean(s['estimate'][after][win] - y[win])))}
     if 'sensor_lf' in s:
         out['steady_error_sensor_m'] = float(abs(np.mean(s['sensor_lf'][after][win]) - a))
