@@ -217,10 +217,17 @@ def friction_input(fk, fs, x, omega) -> float:
 @njit(cache=True)
 def friction_column(F, G, n_lin, i_phi, fs) -> None:
     """F column of the friction scale phi (friction x (1 + phi); the family's F_c, F_s
-    x0.5..2): the force input column of G times the nominal force input -F(v_f)."""
+    x0.5..2): each row's :func:`friction_entry`."""
     if i_phi >= 0:
         for i in range(n_lin):
-            F[i, i_phi] = -G[i, 1] * fs[FS_F]
+            F[i, i_phi] = friction_entry(G[i, 1], fs)
+
+
+@njit(cache=True)
+def friction_entry(g, fs) -> float:
+    """One row of :func:`friction_column`: the row's force input entry g of G times the
+    nominal force input -F(v_f)."""
+    return -g * fs[FS_F]
 
 
 @njit(cache=True)

@@ -290,8 +290,8 @@ def shut_pressure(k, e, Fm, Gm, n, col0, mode, row, x, u, omega) -> float:
         p += Fm[r, j] * x[j]
     for j in range(col0):
         p += Gm[r, j] * u[j]
-    if k.i_friction >= 0:                      # adapt.friction_column
-        p += Gm[r, 1] * u[1] * x[int(k.i_friction)]
+    if k.i_friction >= 0:                      # the row of adapt.friction_column
+        p += adapt.friction_entry(Gm[r, 1], e.friction) * x[int(k.i_friction)]
     pl = e.p_last                              # adapt.pressure_increments, not yet moved on
     fa, fb = adapt.parameter_flows(x, int(k.i_leakage), int(k.i_displacement),
                                    int(k.i_compliance), int(k.i_external_leakage), x[2], x[3],

@@ -110,12 +110,11 @@ class CascadePlants:
     leak_gain: float = 0.0   # K_c (rad/s per Pa): omega_ref += K_c p_D, delayed as omega_ref
 
     def _pressure_loop(self, w):
-        """(1 - K_c P_pw, P_pd) of a fixed leakage compensation omega_ref += K_c p_D (the
+        """1 - K_c P_pw of a fixed leakage compensation omega_ref += K_c p_D (the
         controller's, core.controller.stepper.control, with its leakage estimate frozen):
-        P_pw = p_D/omega_ref with the delay, P_pd = p_D/F_L."""
+        P_pw = p_D/omega_ref with the delay."""
         e = np.exp(-1j * w * self.delay)[None]
-        return (1.0 - self.leak_gain * ss_freqresp(self.A, self.B_ref, self.C_p, w) * e,
-                ss_freqresp(self.A, self.B_load, self.C_p, w))
+        return 1.0 - self.leak_gain * ss_freqresp(self.A, self.B_ref, self.C_p, w) * e
 
     def P_omega(self, w):
         """x/omega_ref (eq. 3.42 with the designed G_v) times e^{-j w T_d}, (N+1, F); with
@@ -123,7 +122,7 @@ class CascadePlants:
         w = np.atleast_1d(np.asarray(w, float))
         P = ss_freqresp(self.A, self.B_ref, self.C_x, w) * np.exp(-1j * w * self.delay)[None]
         if self.leak_gain:
-            P = P / self._pressure_loop(w)[0]
+            P = P / self._pressure_loop(w)
         return P
 
     def delayed_ss(self, order: int = 4):
@@ -148,9 +147,10 @@ class CascadePlants:
         """x/F_L of the same closed velocity loop, (N+1, F); with the leakage compensation
         P_d + P_w K_c P_pd / (1 - K_c P_pw)."""
         P = ss_freqresp(self.A, self.B_load, self.C_x, w)
-        if self.leak_gain:
+        if self.leak_gain:              # P_pd = p_D/F_L
             w = np.atleast_1d(np.asarray(w, float))
-            P = P + self.P_omega(w) * self.leak_gain * self._pressure_loop(w)[1]
+            P = P + self.P_omega(w) * self.leak_gain * ss_freqresp(self.A, self.B_load,
+                                                                   self.C_p, w)
         return P
 
 
