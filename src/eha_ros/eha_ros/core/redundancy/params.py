@@ -28,8 +28,13 @@ def _monitor(name: str, unit: str, trip: float, clear: float, trip_time: float,
 NODE = Schema('switch_manager', [
     Param(S + 'initial_channel', 'int', '', 0, 0, 1,
           doc='couple that drives at start: 0 = A, 1 = B'),
-    Param(S + 'prespin_time', 'float', 's', 0.01, 0.0, 1.0,
-          doc='commanded switch: new drive runs with its valves closed this long first'),
+    Param(S + 'prespin_time', 'float', 's', 0.05, 0.0, 1.0,
+          doc='commanded switch: the new drive runs with its valves closed at most this long '
+              'first (sooner: prespin_match)'),
+    Param(S + 'prespin_match', 'float', 'rad/s', 20.0, 0.0, 1000.0,
+          doc='commanded switch: the new couple\'s valves open as soon as its drive reports '
+              'enabled and its measured speed is within this of the old couple\'s, so the '
+              'flow is handed over at one speed (0: always wait prespin_time)'),
     Param(S + 'fault_prespin_time', 'float', 's', 0.0, 0.0, 1.0,
           doc='automatic switch: the same, usually 0 (isolate the faulty couple at once)'),
     Param(S + 'valve_margin', 'float', 's', 0.005, 0.0, 1.0,

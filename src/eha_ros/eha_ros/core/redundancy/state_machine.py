@@ -72,6 +72,7 @@ class SwitchManager:
         self.Ts = p['plant.sim.Ts']
         self.valve_time = p['plant.valves.onoff_time']
         self.prespin = p[s + 'prespin_time']
+        self.match = p[s + 'prespin_match']
         self.fault_prespin = p[s + 'fault_prespin_time']
         self.margin = p[s + 'valve_margin']
         self.blank = p[s + 'blank_time']
@@ -90,6 +91,8 @@ class SwitchManager:
         self.commanded = False
         self.switch_from = channel
         self.switch_t0 = 0.0
+        self.matching = False        # a commanded switch waits for the speeds to match
+        self.open_t = 0.0            # time the new couple's valves were told to open
         self.switch_count = 0
         self.latched = [False, False]
         self.last_auto = -math.inf
@@ -116,6 +119,13 @@ class SwitchManager:
         return [self.ok(0), self.ok(1)]
 
     # ------------------------------------------------------------------ per tick
+    def matched(self, s: ChannelSample) -> bool:
+        """The new couple's drive reports enabled and its measured speed is within
+        ``prespin_match`` of the old couple's (a non-finite speed never matches)."""
+        new, old = self.target, self.switch_from
+        return bool(s.drive_enabled[new]) and \
+            abs(s.motor_speed[new] - s.motor_speed[old]) <= self.match
+
     def update(self, s: ChannelSample, seq: int = 0) -> bool:
         """One measured state; returns True when the channel select changed."""
         self.t, self.seq = s.t, seq
@@ -125,7 +135,7 @@ class SwitchManager:
         age = [s.t - self.enable_since[c] for c in range(2)]
         self.health.update(s, self.select.drive_enable, steady, age)
         if self.state == SWITCHING:
-            self._switching()
+            self._switching(s)
         elif self.state in (ACTIVE, DEGRADED):
             self._supervise()
         return self.select != before
@@ -148,7 +158,7 @@ class SwitchManager:
                    f'standby channel {NAMES[o]} not available: {self._why_not(o)}')
             self._transition(want, kind, why, a, a)
 
-    def _switching(self):
+    def _switching(self, s: ChannelSample):
         new, old = self.target, self.switch_from
         if not self.health.available(new):
             why = f'channel {NAMES[new]} failed during the switch: {self.health.why(new)}'
@@ -158,13 +168,19 @@ class SwitchManager:
             else:
                 self._safe(why)
             return
+        if self.matching and self.matched(s):       # the valves open now, not at the cap
+            (_, s1), (_, s2) = self.steps
+            self.steps = [(self.t, s1), (self.t + self.valve_time + self.margin, s2)]
         self._apply_due()
+        if self.matching and len(self.steps) < 2:
+            self.matching, self.open_t = False, self.t
         if not self.steps:
             self.role_since = self.t
             state = ACTIVE if self.ok(1 - new) else DEGRADED
             self._transition(state, 'switch_done',
                              f'switch {NAMES[old]} -> {NAMES[new]} complete after '
-                             f'{(self.t - self.switch_t0) * 1e3:.0f} ms', old, new)
+                             f'{(self.t - self.switch_t0) * 1e3:.0f} ms (valves opened after '
+                             f'{(self.open_t - self.switch_t0) * 1e3:.0f} ms)', old, new)
 
     # ------------------------------------------------------------------ commands
     def request(self, channel: int, reason: str = '') -> tuple[bool, str]:
@@ -201,10 +217,14 @@ class SwitchManager:
         t0 = self.t
         s0 = Select(old, tuple(en), cur.valve_open, cur.bypass_open)
         s1 = Select(new, tuple(en), _pair(new), False)
+        # pre-spin: s0 (the new drive on, its valves closed) until t0 + prespin, then s1 (the
+        # valves change over); a commanded switch opens them sooner, once the speeds match
         self.steps = [(t0, s0), (t0 + prespin, s1),
                       (t0 + prespin + self.valve_time + self.margin, Select.only(new))]
         from_state = self.name
         self.target, self.switch_from, self.switch_t0 = new, old, t0
+        self.matching = commanded and self.match > 0.0 and prespin > 0.0
+        self.open_t = t0 + prespin
         self.commanded = commanded
         self.switch_count += 1
         self.state = SWITCHING
@@ -214,6 +234,7 @@ class SwitchManager:
     def _safe(self, why: str):
         from_state = self.name
         self.steps = []
+        self.matching = False
         self._set(Select(self.active, (False, False), (False, False),
                          self.safe_mode == 'bypass'))
         self.state = FAILED_SAFE

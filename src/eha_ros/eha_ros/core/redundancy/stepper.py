@@ -29,7 +29,8 @@ ST_ACTIVE, ST_SWITCHING, ST_DEGRADED, ST_FAILED = range(4)
 G_STATE, G_ACTIVE, G_ENABLE, G_ROLE_SINCE, G_ENABLE_SINCE, G_LATCHED, G_T, G_SEQ = \
     0, 1, 2, 4, 5, 7, 9, 10
 G_TARGET, G_NEXT_STEP = 11, 12      # switch target, time of its next valve/drive step (inf)
-NG = 13
+G_FROM, G_MATCH = 13, 14    # the couple switched from; prespin_match while a switch waits for
+NG = 15                     # the speeds to match (SwitchManager.matched), else 0
 
 
 class Arrays(NamedTuple):
@@ -52,6 +53,8 @@ def pack(mgr) -> Arrays:
     g[G_ROLE_SINCE], g[G_T], g[G_SEQ] = mgr.role_since, mgr.t, mgr.seq
     g[G_TARGET] = mgr.target
     g[G_NEXT_STEP] = mgr.steps[0][0] if mgr.steps else math.inf
+    g[G_FROM] = mgr.switch_from
+    g[G_MATCH] = mgr.match if mgr.matching else 0.0
     for c in range(2):
         g[G_ENABLE + c] = mgr.select.drive_enable[c]
         g[G_ENABLE_SINCE + c] = mgr.enable_since[c]
@@ -88,6 +91,9 @@ def supervise(a, t, seq, lo_ref, hi_ref, loop_ok, w_meas, i_meas, pa, pb, report
         return True
     if state == ST_SWITCHING:       # _switching: target still available, no step due
         new = int(g[G_TARGET])
+        if g[G_MATCH] > 0.0 and reported[new] and \
+                abs(w_meas[new] - w_meas[int(g[G_FROM])]) <= g[G_MATCH]:
+            return False            # the speeds match: the valves open now
         return available(ms, new) and g[G_NEXT_STEP] > t + 1e-9
     if not healthy(ms, a):
         return False
