@@ -12,6 +12,10 @@ Fig. 3.12; opening time T_v = plant.valves.onoff_time):
   t = T_pre       channel := new; new valves open and old valves close together: the two
                   fractions cross over, so the total pump displacement seen by the piston
                   stays D_p (same speed on both shafts) and the flow hand-over is smooth.
+                  A commanded switch: T_pre is the first sample on which the new drive reports
+                  enabled and its speed is within switch.prespin_match of the old one's, at
+                  most switch.prespin_time (the estimator's model input, the active couple's
+                  speed, then stays the pump's: docs/nodes/switch_manager.md).
   t = T_pre+T_v+m old drive disabled (its valves are closed): switch complete.
 
 Safe state (both failed), ``switch.safe_mode``:
@@ -31,6 +35,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from numba import njit
+
 from .events import SwitchEvent
 from .health import ChannelSample, HealthMonitor
 
@@ -38,6 +44,15 @@ ACTIVE, SWITCHING, DEGRADED, FAILED_SAFE = 'ACTIVE', 'SWITCHING', 'DEGRADED', 'F
 NAMES = ('A', 'B')
 # the state names of name() as numbers, for recorded arrays (batch, campaigns)
 STATE_CODES = {'ACTIVE_A': 0, 'ACTIVE_B': 1, 'SWITCHING': 2, 'DEGRADED': 3, 'FAILED_SAFE': 4}
+
+
+@njit(cache=True)
+def speeds_match(enabled_new: bool, w_new: float, w_old: float, tolerance: float) -> bool:
+    """A commanded switch's pre-spin is over: the new couple's drive reports enabled and its
+    measured speed is within ``tolerance`` (switch.prespin_match) of the old couple's (a
+    non-finite speed never matches). SwitchManager and its compiled tick (stepper) both ask
+    here."""
+    return enabled_new and abs(w_new - w_old) <= tolerance
 
 
 def state_name(state: str, channel: int) -> str:
@@ -120,11 +135,11 @@ class SwitchManager:
 
     # ------------------------------------------------------------------ per tick
     def matched(self, s: ChannelSample) -> bool:
-        """The new couple's drive reports enabled and its measured speed is within
-        ``prespin_match`` of the old couple's (a non-finite speed never matches)."""
+        """:func:`speeds_match` of this switch's couples on sample s (its Python source: no
+        compile or cache load at a node's first switch)."""
         new, old = self.target, self.switch_from
-        return bool(s.drive_enabled[new]) and \
-            abs(s.motor_speed[new] - s.motor_speed[old]) <= self.match
+        return speeds_match.py_func(bool(s.drive_enabled[new]), float(s.motor_speed[new]),
+                                    float(s.motor_speed[old]), self.match)
 
     def update(self, s: ChannelSample, seq: int = 0) -> bool:
         """One measured state; returns True when the channel select changed."""

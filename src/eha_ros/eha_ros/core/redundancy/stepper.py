@@ -19,9 +19,9 @@ from numba import njit
 from ..jit_cache import drop_stale
 from ..kernel_records import Tensor3, Vector, entry_point
 from .health import K_BLANK, ChannelSample, available, health, healthy
-from .state_machine import ACTIVE, DEGRADED, FAILED_SAFE, SWITCHING
+from .state_machine import ACTIVE, DEGRADED, FAILED_SAFE, SWITCHING, speeds_match
 
-drop_stale(__file__)         # supervise() inlines health's kernels
+drop_stale(__file__)         # supervise() inlines health's and state_machine's kernels
 
 STATES = (ACTIVE, SWITCHING, DEGRADED, FAILED_SAFE)
 ST_ACTIVE, ST_SWITCHING, ST_DEGRADED, ST_FAILED = range(4)
@@ -91,9 +91,9 @@ def supervise(a, t, seq, lo_ref, hi_ref, loop_ok, w_meas, i_meas, pa, pb, report
         return True
     if state == ST_SWITCHING:       # _switching: target still available, no step due
         new = int(g[G_TARGET])
-        if g[G_MATCH] > 0.0 and reported[new] and \
-                abs(w_meas[new] - w_meas[int(g[G_FROM])]) <= g[G_MATCH]:
-            return False            # the speeds match: the valves open now
+        if g[G_MATCH] > 0.0 and speeds_match(reported[new], w_meas[new],
+                                             w_meas[int(g[G_FROM])], g[G_MATCH]):
+            return False            # the valves open now
         return available(ms, new) and g[G_NEXT_STEP] > t + 1e-9
     if not healthy(ms, a):
         return False
