@@ -106,7 +106,6 @@ class SwitchManager:
         self.commanded = False
         self.switch_from = channel
         self.switch_t0 = 0.0
-        self.matching = False        # a commanded switch waits for the speeds to match
         self.open_t = 0.0            # time the new couple's valves were told to open
         self.switch_count = 0
         self.latched = [False, False]
@@ -134,6 +133,12 @@ class SwitchManager:
         return [self.ok(0), self.ok(1)]
 
     # ------------------------------------------------------------------ per tick
+    @property
+    def waiting(self) -> bool:
+        """A commanded switch's pre-spin runs with speed matching on: its valve change-over
+        (steps[0]) not applied yet."""
+        return self.commanded and self.match > 0.0 and len(self.steps) == 2
+
     def matched(self, s: ChannelSample) -> bool:
         """:func:`speeds_match` of this switch's couples on sample s (its Python source: no
         compile or cache load at a node's first switch)."""
@@ -183,12 +188,13 @@ class SwitchManager:
             else:
                 self._safe(why)
             return
-        if self.matching and self.matched(s):       # the valves open now, not at the cap
+        waiting = self.waiting
+        if waiting and self.matched(s):              # the valves open now, not at the cap
             (_, s1), (_, s2) = self.steps
             self.steps = [(self.t, s1), (self.t + self.valve_time + self.margin, s2)]
         self._apply_due()
-        if self.matching and len(self.steps) < 2:
-            self.matching, self.open_t = False, self.t
+        if waiting and not self.waiting:
+            self.open_t = self.t
         if not self.steps:
             self.role_since = self.t
             state = ACTIVE if self.ok(1 - new) else DEGRADED
@@ -238,7 +244,6 @@ class SwitchManager:
                       (t0 + prespin + self.valve_time + self.margin, Select.only(new))]
         from_state = self.name
         self.target, self.switch_from, self.switch_t0 = new, old, t0
-        self.matching = commanded and self.match > 0.0 and prespin > 0.0
         self.open_t = t0 + prespin
         self.commanded = commanded
         self.switch_count += 1
@@ -249,7 +254,6 @@ class SwitchManager:
     def _safe(self, why: str):
         from_state = self.name
         self.steps = []
-        self.matching = False
         self._set(Select(self.active, (False, False), (False, False),
                          self.safe_mode == 'bypass'))
         self.state = FAILED_SAFE

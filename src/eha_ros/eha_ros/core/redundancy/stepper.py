@@ -30,7 +30,7 @@ G_STATE, G_ACTIVE, G_ENABLE, G_ROLE_SINCE, G_ENABLE_SINCE, G_LATCHED, G_T, G_SEQ
     0, 1, 2, 4, 5, 7, 9, 10
 G_TARGET, G_NEXT_STEP = 11, 12      # switch target, time of its next valve/drive step (inf)
 G_FROM, G_MATCH = 13, 14    # the couple switched from; prespin_match while a switch waits for
-NG = 15                     # the speeds to match (SwitchManager.matched), else 0
+NG = 15                     # the speeds to match (SwitchManager.waiting), else 0
 
 
 class Arrays(NamedTuple):
@@ -54,7 +54,7 @@ def pack(mgr) -> Arrays:
     g[G_TARGET] = mgr.target
     g[G_NEXT_STEP] = mgr.steps[0][0] if mgr.steps else math.inf
     g[G_FROM] = mgr.switch_from
-    g[G_MATCH] = mgr.match if mgr.matching else 0.0
+    g[G_MATCH] = mgr.match if mgr.waiting else 0.0
     for c in range(2):
         g[G_ENABLE + c] = mgr.select.drive_enable[c]
         g[G_ENABLE_SINCE + c] = mgr.enable_since[c]
