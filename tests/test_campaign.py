@@ -450,7 +450,7 @@ def test_cli_runs_scenarios_on_seeds_as_a_set(tmp_path):
     scns = []
     for name, kind, params, specs in (
             ('short_step', 'step', {'duration': 0.8, 'steady': [0.4, 0.7]},
-             {'overshoot_pct': {'max': 5.0}}),
+             {'overshoot_pct': {'max': 5.0}, 'steady_error_m': {'max': 1e-9}}),  # fails
             ('short_load', 'load_step', {'duration': 1.2, 't_step': 0.2, 'steady': [0.6, 1.0]},
              {'peak_deviation_m': {'max': 1e-4}})):     # fails at least on C_eq x10
         p = tmp_path / f'{name}.yaml'
@@ -466,6 +466,9 @@ def test_cli_runs_scenarios_on_seeds_as_a_set(tmp_path):
     assert summary['seeds'] == [101, 102] and set(summary['roles'].values()) == {'held-out'}
     s = summary['scenarios']
     assert s['short_step']['per_seed']['101']['runs'] == 3
+    # beside a failed steady error: the floor the sensor noise of that run sets
+    for f in s['short_step']['failures']:
+        assert 0.0 < f['values']['steady_error_bound_m'] < 1e-4, f
     load = s['short_load']
     assert not load['all_passed'] and load['worst_passed'] <= 2
     assert all(f['plant']['C_eq'] == 10.0 for f in load['failures'] if f['run_id'] == 2)
@@ -476,6 +479,7 @@ def test_cli_runs_scenarios_on_seeds_as_a_set(tmp_path):
     assert info['seed_role'] == 'held-out' and info['complete']
     md = (out / 'summary.md').read_text()
     assert '| short_load | 3 |' in md and 'seed 101' in md, md
+    assert 'steady_error_bound_m 0.0' in md, md
     again = cli(*args)
     assert again.returncode == 0 and again.stderr.count('done before, kept') == 4, again.stderr
     for bad, why in ((['--seeds', 'x1'], '--seeds'), (['--seeds', '1', '--seed', '2'], 'not both')):

@@ -21,6 +21,7 @@ import time
 from ..config.cli import UsageError
 from ..io.report import write_json
 from .campaign import RECORD_SEEDS, TUNING_SEEDS, run_campaign, seed_role
+from .scenarios import BESIDE
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -118,8 +119,8 @@ def summarize(folders: dict, family: str) -> dict:
                     seed=seed, run_id=int(r['run_id']), failed_specs=str(r['failed_specs']),
                     error=str(r.get('error', '') or ''),
                     plant={c: round(float(r[c]), 4) for c in COLUMNS if c in r},
-                    values={m: _val(r.get(m)) for m in str(r['failed_specs']).split(',')
-                            if m in r}))
+                    values={c: _val(r.get(c)) for m in str(r['failed_specs']).split(',')
+                            for c in (m,) + BESIDE.get(m, ()) if c in r}))
         passed = [v['passed'] for v in per_seed.values()]
         runs = [v['runs'] for v in per_seed.values()]
         worst = min(per_seed, key=lambda s: (per_seed[s]['passed'] / max(1, per_seed[s]['runs'])))
