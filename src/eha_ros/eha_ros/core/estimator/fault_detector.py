@@ -2,12 +2,21 @@
 NIS of the Kalman filter as a fault-detection signal).
 
 - jump: |innovation| / sqrt(S) above ``JUMP_THRESHOLD`` for ``jump_debounce`` samples, and
-  (with ``jump_step`` > 0) the run began with a step of the position innovation of at least
-  ``jump_step`` within one sample while the pressure innovations stayed below
-  ``jump_pressure_veto`` (normalised): a sensor jump moves the reading at once and leaves the
-  pressure sensors alone; the piston itself can move that fast only by compressing the oil
-  (a 5 kN load step moves it 0.22 mm within one tick: V_d/(beta A_p) times 19 bar), which
-  the pressure sensors see, on the run's first sample or the next (VETO_SAMPLES). Later
+  (with ``jump_step`` > 0) the run began with a step of the position innovation away from
+  zero of at least ``jump_step`` within one sample, while the pressure innovations stayed
+  below ``jump_pressure_veto`` (normalised) and the measured pressure difference moved by
+  less than COMPRESSION_SHARE of what compressing the oil by that step takes (2 beta A_p /
+  V_d per m, eq. 3.20-3.21 at mid-stroke): a sensor jump moves the reading at once and
+  leaves the pressure sensors alone; the piston itself can move that fast only by
+  compressing the oil (a 5 kN load step moves it 0.22 mm within one tick: V_d/(beta A_p)
+  times 19 bar), which the pressure sensors see, on the run's first sample or the next
+  (VETO_SAMPLES). The measured p_D speaks where the innovation cannot: a 10 kN step on a
+  beta x0.69 plant (random:200) read p_B below 0 bar gauge on its first sample, which was
+  rejected, so that sample had no pressure innovation; p_D had moved by 38 bar on the next
+  valid one, where a sensor jump moves it by nothing (the loop's answer reaches the
+  pressures a drive delay later). The same run's innovation then fell back from -377 to
+  -184 um while still beyond the threshold: that is the filter catching up, not a new
+  jump. Later
   samples' pressure innovations are the loop's own answer to the jump (the estimate moved,
   the controller commanded, the pump compressed the oil): a 1 mm bias on Table 4.5 plant 36
   gave -8.0 and -10.6 sigma on p_B at its third and fourth samples, and a veto there left the
@@ -34,6 +43,10 @@ from . import sensor_band
 
 NONE, JUMP, STUCK, DRIFT = 0, 1, 2, 3
 VETO_SAMPLES = 2        # a jump's samples whose pressure innovation can veto it (see above)
+# share of the p_D that compressing the oil by a jump's step takes (nominal plant) that the
+# measured p_D must move by on the jump's first samples to veto it: a load step on the family
+# (beta x0.7-1.4) moves it by 0.5-1.5 of that, a sensor jump by the pressure noise only
+COMPRESSION_SHARE = 0.25
 NAMES = {NONE: 'none', JUMP: 'jump', STUCK: 'stuck', DRIFT: 'drift'}
 
 
@@ -58,13 +71,17 @@ DRIFT_DEBOUNCE = 5
 # constants (FK_*) and state (FS_*) of one detector: its own two arrays, which the estimator's
 # compiled path (core.estimator.stepper) reads and writes in place through slices
 (FK_JUMP, FK_JUMP_N, FK_STUCK_N, FK_DRIFT_K, FK_DRIFT_H, FK_DRIFT_N, FK_HOLD, FK_JUMP_STEP,
- FK_JUMP_PVETO) = range(9)
-NFK = 9
+ FK_JUMP_PVETO,
+ FK_PD_PER_M) = range(10)   # p_D (Pa) per m of piston travel by compressing the oil (0: none)
+NFK = 10
 (FS_NJUMP, FS_NSAME, FS_NDRIFT, FS_GPOS, FS_GNEG, FS_ZPREV, FS_HAS_ZPREV, FS_YPREV,
  FS_STEPPED, FS_CODE) = range(10)
 FS_HOLD = 10            # 3 entries: JUMP, STUCK, DRIFT (ticks the verdict stays reported)
 FS_DET = 13             # 3 entries: detections counted
-NFS = 16
+# the last measured p_D (of a sample that had the pressures), the one before a jump's run
+# (its reference) and the run's innovation step away from zero
+FS_PD1, FS_PDREF, FS_STEP = 16, 17, 18
+NFS = 19
 CODES = (JUMP, STUCK, DRIFT)
 
 
@@ -96,13 +113,17 @@ def _report(k, s, now_jump, now_stuck, now_drift) -> int:
 
 
 @njit(cache=True)
-def detect(k, s, z, innovation, S, pz) -> int:
+def detect(k, s, z, innovation, S, pz, pd) -> int:
     """One position sample z (m) with its innovation (m) and innovation variance S (m^2); pz:
-    the largest normalised pressure innovation of the same update (0: none). Returns the code.
+    the largest normalised pressure innovation of the same update (0: none); pd: the measured
+    pressure difference p_A - p_B of the sample (Pa; NaN: none). Returns the code.
 
     r = innovation / sqrt(S)
     jump:  |r| > FK_JUMP for FK_JUMP_N samples, the run began with an innovation step
-           >= FK_JUMP_STEP and no pressure innovation >= FK_JUMP_PVETO
+           away from zero, step = sign(innovation) (innovation - previous innovation),
+           >= FK_JUMP_STEP, and on its first VETO_SAMPLES samples no pressure innovation
+           >= FK_JUMP_PVETO and |pd - the last pd before the run| below
+           COMPRESSION_SHARE FK_PD_PER_M step
     stuck: z equal to the previous z for FK_STUCK_N samples
     drift: g+ = max(0, g+ + r - FK_DRIFT_K), g- = max(0, g- - r - FK_DRIFT_K) above FK_DRIFT_H
            for FK_DRIFT_N samples"""
@@ -111,10 +132,21 @@ def detect(k, s, z, innovation, S, pz) -> int:
     # a jump starts with a one-sample innovation step, and the pressures stay quiet on it and
     # the next sample (a load step's pressure innovation can come a sample late)
     if s[FS_NJUMP] == 1:
-        s[FS_STEPPED] = 1.0 if abs(innovation - s[FS_YPREV]) >= k[FK_JUMP_STEP] else 0.0
-    if pz >= k[FK_JUMP_PVETO] and 0 < s[FS_NJUMP] <= VETO_SAMPLES:
-        s[FS_STEPPED] = 0.0
+        # the step away from zero: an innovation falling back (the filter catching up with a
+        # transient) is not a jump's onset
+        s[FS_STEP] = math.copysign(1.0, innovation) * (innovation - s[FS_YPREV])
+        s[FS_STEPPED] = 1.0 if s[FS_STEP] >= k[FK_JUMP_STEP] else 0.0
+        s[FS_PDREF] = s[FS_PD1]
+    if 0 < s[FS_NJUMP] <= VETO_SAMPLES:
+        # the oil compressed: the pressures' innovation, or the measured p_D itself moved
+        # from its last value before the run (NaN, no pressures in this sample: no veto by it)
+        compressed = COMPRESSION_SHARE * k[FK_PD_PER_M] * s[FS_STEP]
+        if pz >= k[FK_JUMP_PVETO] or (compressed > 0.0
+                                      and abs(pd - s[FS_PDREF]) >= compressed):
+            s[FS_STEPPED] = 0.0
     s[FS_YPREV] = innovation
+    if pd == pd:
+        s[FS_PD1] = pd
     same = s[FS_HAS_ZPREV] > 0.5 and z == s[FS_ZPREV]
     s[FS_NSAME] = s[FS_NSAME] + 1 if same else 0
     s[FS_ZPREV] = z
@@ -150,14 +182,17 @@ class FaultDetector:
                  stuck_samples: int = 25, drift_k: float = DRIFT_K,
                  drift_h: float = 150.0, drift_debounce: int = DRIFT_DEBOUNCE,
                  hold_time: float = 0.5,
-                 jump_step: float = 0.0, jump_pressure_veto: float = 1e300):
+                 jump_step: float = 0.0, jump_pressure_veto: float = 1e300,
+                 pd_per_m: float = 0.0):
         self.Ts = Ts
         self.k = np.zeros(NFK)
         self.k[:] = (jump_threshold, jump_debounce, stuck_samples, drift_k, drift_h,
-                     drift_debounce, int(round(hold_time / Ts)), jump_step, jump_pressure_veto)
+                     drift_debounce, int(round(hold_time / Ts)), jump_step, jump_pressure_veto,
+                     pd_per_m)
         self.s = np.zeros(NFS)
         # compiled (or loaded) now: no_sample() is first called by a stale tick, mid-run
-        detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0), no_sample(self.k, self.s.copy())
+        detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0, math.nan)
+        no_sample(self.k, self.s.copy())
 
     @classmethod
     def from_params(cls, p: dict, Ts: float) -> 'FaultDetector':
@@ -165,7 +200,10 @@ class FaultDetector:
         return cls(Ts, jump_debounce=p[f + 'jump_debounce'], stuck_samples=p[f + 'stuck_samples'],
                    drift_h=p[f + 'drift_h'], hold_time=p['estimator.hold_time'],
                    jump_step=sensor_band.from_params(p).jump_step,
-                   jump_pressure_veto=p[f + 'jump_pressure_veto'])
+                   jump_pressure_veto=p[f + 'jump_pressure_veto'],
+                   # eq. 3.20-3.21 at mid-stroke, both chambers: d p_D = 2 beta A_p / V_d dx
+                   pd_per_m=2.0 * p['plant.fluid.beta'] * p['plant.cylinder.A_p']
+                   / p['plant.cylinder.V_d'])
 
     def reset(self):
         self.s[:] = 0.0
@@ -174,8 +212,10 @@ class FaultDetector:
         """The first sample: the reference of the stuck test, nothing judged."""
         self.s[FS_ZPREV], self.s[FS_HAS_ZPREV] = z, 1.0
 
-    def update(self, z: float, innovation: float, S: float, pz: float = 0.0) -> int:
-        return detect(self.k, self.s, float(z), float(innovation), float(S), float(pz))
+    def update(self, z: float, innovation: float, S: float, pz: float = 0.0,
+               pd: float = math.nan) -> int:
+        return detect(self.k, self.s, float(z), float(innovation), float(S), float(pz),
+                      float(pd))
 
     def tick_without_sample(self) -> int:
         return no_sample(self.k, self.s)

@@ -421,12 +421,14 @@ def estimate(K, E, a, position, w, pa, pb):
                            int(k.i_moved), k.moved_gate)
         innov, s00, m = y[0], S[0, 0], zm.shape[0]
         pz = fd.pressure_z(y, S, m)
+        pd = pa - pb if k.chambers > 0.5 else e.pd_meas
     else:
         z1[0] = position
         nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k.i_frozen), k.adapt_gate,
                            -1, 0.0)
         innov, s00, m = y1[0], S1[0, 0], 1
         pz = 0.0
+        pd = math.nan
     if k.chambers > 0.5:
         lam, dlt, kap = k.leakage_range, k.displacement_range, k.compliance_range
         phi, eps = k.friction_range, k.external_leakage_range
@@ -436,7 +438,7 @@ def estimate(K, E, a, position, w, pa, pb):
                                eps[0], eps[1], int(k.i_gm), k.offset_bound, e.clipped,
                                adapt.EDGE_TICKS)
     e.updates += 1
-    fd.detect(k.detector, e.detector, position, innov, s00, pz)
+    fd.detect(k.detector, e.detector, position, innov, s00, pz, pd)
     if k.chambers > 0.5:
         # does the load swing? (read by consistency: the position noise)
         adapt.load_swinging(x, e.load, k.swing_band, k.load_hold)
