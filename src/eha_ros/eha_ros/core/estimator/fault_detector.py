@@ -43,9 +43,11 @@ from . import sensor_band
 
 NONE, JUMP, STUCK, DRIFT = 0, 1, 2, 3
 VETO_SAMPLES = 2        # a jump's samples whose pressure innovation can veto it (see above)
-# share of the p_D that compressing the oil by a jump's step takes (nominal plant) that the
-# measured p_D must move by on the jump's first samples to veto it: a load step on the family
-# (beta x0.7-1.4) moves it by 0.5-1.5 of that, a sensor jump by the pressure noise only
+# share of the p_D that compressing the oil of both chambers by a jump's step takes (nominal
+# plant) that the measured p_D must move by on the jump's first samples to veto it: a load
+# step moves it by about 0.35-1.4 of that (half when the unloaded chamber sits on its check
+# valve and only the loaded one compresses; beta x0.7-1.4 over the family: 38 bar for 0.43 mm
+# on the beta x0.69 plant below), a sensor jump by the pressure noise only
 COMPRESSION_SHARE = 0.25
 NAMES = {NONE: 'none', JUMP: 'jump', STUCK: 'stuck', DRIFT: 'drift'}
 
