@@ -19,17 +19,17 @@ the limit in some fraction of runs fails at least about that fraction with any e
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from ..redundancy.health import pole
 
 # the diffuse prior of the start position (m^2): far above any sensor variance
 DIFFUSE_VAR = 1.0
 
 
-def start_gains(n: int, Ts: float, sigma_w: float, sigma_g: float, f_c: float) -> np.ndarray:
-    """Kalman gains (n x 2) of the filter above; they do not depend on the readings."""
-    a = math.exp(-2.0 * math.pi * f_c * Ts)
+def start_gains(n: int, a: float, sigma_w: float, sigma_g: float) -> np.ndarray:
+    """Kalman gains (n x 2) of the filter above (a: the Gauss-Markov pole); they do not
+    depend on the readings."""
     q = (1.0 - a * a) * sigma_g ** 2
     r = sigma_w ** 2
     # P over [x, g]: x diffuse, g at its stationary variance
@@ -54,8 +54,8 @@ def start_estimate(y, Ts: float, sigma_w: float, sigma_g: float, f_c: float) -> 
     readings; leading axes: independent runs)."""
     y = np.asarray(y, float)
     n = y.shape[-1]
-    K = start_gains(n, Ts, sigma_w, sigma_g, f_c)
-    a = math.exp(-2.0 * math.pi * f_c * Ts)
+    a = pole(f_c, Ts)
+    K = start_gains(n, a, sigma_w, sigma_g)
     x = np.zeros(y.shape[:-1])
     g = np.zeros(y.shape[:-1])
     out = np.empty(y.shape)
