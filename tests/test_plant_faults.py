@@ -137,3 +137,32 @@ def test_pressure_sensor_bias_and_stuck():
     _run(plant, 100, load=20e3)
     assert plant.measure().pressure_a == frozen
     assert abs(plant.truth().pressure_a - frozen) > 10e5
+
+
+@pytest.mark.parametrize('side', ['a', 'b'])
+def test_one_pressure_sensor_bias_and_stuck(side):
+    """pressure_sensor_a / _b: only that chamber's reading is biased or frozen, the other reads
+    the truth; a bias on one side plus one on both add up."""
+    plant = _quiet()
+    _run(plant, 10)
+    own, other = f'pressure_{side}', f'pressure_{"b" if side == "a" else "a"}'
+    assert plant.inject_fault(f'pressure_sensor_{side}', 1, -3e5, 0.05)[0]
+    _run(plant, 1)
+    m, tr = plant.measure(), plant.truth()
+    assert getattr(m, own) - getattr(tr, own) == pytest.approx(-3e5)
+    assert getattr(m, other) == getattr(tr, other)
+    assert plant.inject_fault('pressure_sensor', 0, 1e5, 0.05)[0]
+    _run(plant, 1)
+    m, tr = plant.measure(), plant.truth()
+    assert getattr(m, own) - getattr(tr, own) == pytest.approx(-2e5)
+    assert getattr(m, other) - getattr(tr, other) == pytest.approx(1e5)
+    _run(plant, 60)
+    m, tr = plant.measure(), plant.truth()
+    assert (m.pressure_a, m.pressure_b) == (tr.pressure_a, tr.pressure_b)
+    assert plant.inject_fault(f'pressure_sensor_{side}', 0, math.nan, 0.0)[0]
+    _run(plant, 1)
+    frozen = getattr(plant.measure(), own)
+    _run(plant, 100, load=20e3 if side == 'a' else -20e3)    # loads the stuck sensor's chamber
+    m, tr = plant.measure(), plant.truth()
+    assert getattr(m, own) == frozen and abs(getattr(tr, own) - frozen) > 10e5
+    assert getattr(m, other) == getattr(tr, other)

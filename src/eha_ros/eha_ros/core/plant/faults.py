@@ -20,14 +20,17 @@ FAULTS = {
     'motor_fail': "channel's motor gives no torque, its drive reports a fault, current 0",
     'pump_leakage': "channel's pump leakage coefficients C_p, C_r times magnitude (>= 0)",
     'pressure_sensor': 'bias magnitude (Pa) on both pressure readings; NaN = both stuck',
+    'pressure_sensor_a': "bias magnitude (Pa) on chamber A's pressure reading only; NaN = stuck",
+    'pressure_sensor_b': "bias magnitude (Pa) on chamber B's pressure reading only; NaN = stuck",
 }
+PRESSURE_FAULTS = ('pressure_sensor', 'pressure_sensor_a', 'pressure_sensor_b')
 CLEAR = 'clear'         # not a fault: removes every active fault (channel, magnitude ignored)
 # numeric codes of the compiled path: the position in FAULTS
 FAULT_CODES = {name: i for i, name in enumerate(FAULTS)}
 (FC_MSP_NOISE, FC_MSP_STUCK, FC_MSP_BIAS, FC_MSP_DRIFT, FC_MOTOR_FAIL, FC_PUMP_LEAKAGE,
- FC_PRESSURE_SENSOR) = (FAULT_CODES[n] for n in (
+ FC_PRESSURE_SENSOR, FC_PRESSURE_A, FC_PRESSURE_B) = (FAULT_CODES[n] for n in (
     'msp_noise', 'msp_stuck', 'msp_bias', 'msp_drift', 'motor_fail', 'pump_leakage',
-    'pressure_sensor'))
+    *PRESSURE_FAULTS))
 # fault table rows: code, channel, magnitude, t_start, t_end; one per (name, channel) at most
 F_CODE, F_CH, F_MAG, F_T0, F_T1 = range(5)
 MAX_FAULTS = 2 * len(FAULTS)
@@ -49,7 +52,7 @@ def apply_faults(t, U, table, n) -> None:
     U[L.U_FAIL1] = 0.0
     U[L.U_LEAK0] = 1.0
     U[L.U_LEAK1] = 1.0
-    for j in range(L.U_FX_SIGMA, L.U_FP_STUCK + 1):
+    for j in range(L.U_FX_SIGMA, L.U_FPB_STUCK + 1):
         U[j] = 0.0
     for i in range(n):
         code = int(table[i, F_CODE])
@@ -67,11 +70,13 @@ def apply_faults(t, U, table, n) -> None:
             U[L.U_FX_BIAS] += mag * (t - table[i, F_T0])
         elif code == FC_MSP_STUCK:
             U[L.U_FX_STUCK] = 1.0
-        elif code == FC_PRESSURE_SENSOR:
-            if math.isnan(mag):
-                U[L.U_FP_STUCK] = 1.0
-            else:
-                U[L.U_FP_BIAS] = mag
+        elif code == FC_PRESSURE_SENSOR or code == FC_PRESSURE_A or code == FC_PRESSURE_B:
+            for side in range(2):       # 0: chamber A, 1: chamber B
+                if code == FC_PRESSURE_SENSOR or code == FC_PRESSURE_A + side:
+                    if math.isnan(mag):
+                        U[L.U_FPA_STUCK + 2 * side] = 1.0
+                    else:
+                        U[L.U_FPA_BIAS + 2 * side] += mag
 
 
 @dataclass
@@ -115,7 +120,7 @@ class FaultSet:
             return False, f'fault {name}: channel = {channel}: expected 0 or 1'
         if not math.isfinite(duration) or duration < 0:
             return False, f'fault {name}: duration = {duration}: expected finite >= 0 s'
-        if not math.isfinite(magnitude) and not (name == 'pressure_sensor'
+        if not math.isfinite(magnitude) and not (name in PRESSURE_FAULTS
                                                  and math.isnan(magnitude)):
             return False, f'fault {name}: magnitude = {magnitude}: expected a finite number'
         if name == 'pump_leakage' and magnitude < 0:
@@ -126,7 +131,7 @@ class FaultSet:
         if abs(magnitude) > limit:
             return False, (f'fault {name}: magnitude = {magnitude:g}: beyond the sensor range '
                            f'(|magnitude| <= {limit:g})')
-        if name.startswith('msp') or name == 'pressure_sensor':
+        if name.startswith('msp') or name in PRESSURE_FAULTS:
             channel = 0        # one position sensor and one pair of pressure sensors
         t_end = math.inf if duration == 0 else t + duration
         self.active[(name, channel)] = Fault(name, channel, magnitude, t, t_end)

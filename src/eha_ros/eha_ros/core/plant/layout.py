@@ -26,9 +26,9 @@ NCH = 11
 (C_W, C_I, C_ID, C_IIQ, C_IID, C_IW, C_IF, C_FV, C_VQ, C_VD, C_TQ) = range(NCH)
 NSTATE = S_CH + 2 * NCH
 
-NIN = 16
+NIN = 18                # U_FP*: chamber A's pressure sensor, then B's (bias, stuck)
 (U_WREF, U_FL, U_EN0, U_EN1, U_VT0, U_VT1, U_BT, U_FAIL0, U_FAIL1, U_LEAK0, U_LEAK1,
- U_FX_SIGMA, U_FX_BIAS, U_FX_STUCK, U_FP_BIAS, U_FP_STUCK) = range(NIN)
+ U_FX_SIGMA, U_FX_BIAS, U_FX_STUCK, U_FPA_BIAS, U_FPA_STUCK, U_FPB_BIAS, U_FPB_STUCK) = range(NIN)
 
 NM = 7
 (M_X, M_W0, M_W1, M_I0, M_I1, M_PA, M_PB) = range(NM)

@@ -16,7 +16,8 @@ def sample(S, P, U, n, out):
 
     Position: x + white + first-order Gauss-Markov (pole exp(-2 pi f_c Ts), state S_GM) +
     fault bias/noise, quantised to the resolution; a stuck sensor keeps its previous output.
-    Speeds and currents: white noise. Pressures: white noise + fault bias, or frozen (stuck).
+    Speeds and currents: white noise. Pressures: white noise + fault bias, or frozen (stuck),
+    each sensor on its own.
     """
     on = P[L.P_NOISE_ON]
     a = P[L.P_GM_A]
@@ -33,9 +34,10 @@ def sample(S, P, U, n, out):
         b = L.S_CH + c * L.NCH
         out[L.M_W0 + c] = S[b + L.C_W] + on * P[L.P_W_SIGMA] * n[2 + c]
         out[L.M_I0 + c] = S[b + L.C_I] + on * P[L.P_I_SIGMA] * n[4 + c]
-    if U[L.U_FP_STUCK] < 0.5:
-        out[L.M_PA] = S[L.S_PA] + on * P[L.P_PR_SIGMA] * n[6] + U[L.U_FP_BIAS]
-        out[L.M_PB] = S[L.S_PB] + on * P[L.P_PR_SIGMA] * n[7] + U[L.U_FP_BIAS]
+    if U[L.U_FPA_STUCK] < 0.5:
+        out[L.M_PA] = S[L.S_PA] + on * P[L.P_PR_SIGMA] * n[6] + U[L.U_FPA_BIAS]
+    if U[L.U_FPB_STUCK] < 0.5:
+        out[L.M_PB] = S[L.S_PB] + on * P[L.P_PR_SIGMA] * n[7] + U[L.U_FPB_BIAS]
 
 
 class NoiseSource:
