@@ -253,6 +253,46 @@ def test_both_failed_safe_state_latched_no_oscillation(params, mode):
     assert mode in b.m.events[-1].reason
 
 
+def _pressure_run(params, residual_b):
+    """A drives with 10 A (109 bar of torque) and the measured p_D 89 bar off that from 0.3 s
+    (residual -89 bar: what a sensor offset of +89 bar does); after the automatic switch B
+    drives with residual ``residual_b`` (Pa)."""
+    m = SwitchManager(params)
+    k_T, D_p = params['plant.motor.k_T'], params['plant.pump.D_p']
+    torque = k_T * 10.0 / D_p
+    for k in range(1500):
+        a = m.active
+        off = 0.0 if k < 300 else (-89e5 if a == 0 else residual_b)
+        w = tuple(100.0 if c == a else 0.0 for c in range(2))
+        i = tuple(10.0 if c == a else 0.0 for c in range(2))
+        m.update(ChannelSample(k * 1e-3, 100.0, w, i, 1e6 + torque - off, 1e6,
+                               m.select.drive_enable, (False, False), True, 1e-5, True), k)
+    return m
+
+
+def test_pressure_sensor_fault_is_not_two_couple_faults(params):
+    """The residual that switched A out comes back on B: the pressure sensors both share are
+    wrong, not both couples. B keeps driving, A is available again, the pressure monitor is off
+    and reported; no safe state."""
+    m = _pressure_run(params, -89e5)
+    kinds = [e.kind for e in m.events]
+    print(kinds, m.events[-1].reason)
+    assert kinds == ['switch_start', 'switch_done', 'sensor_fault']
+    assert m.events[0].reason.startswith('channel A unhealthy: pressure')
+    assert 'pressure sensors' in m.events[-1].reason and m.pressure_sensor_fault
+    assert m.name == 'ACTIVE_B' and m.channel_healthy == [True, True] and m.switch_count == 1
+    assert m.health.failed(0) == m.health.failed(1) == []
+
+
+@pytest.mark.parametrize('residual_b', [89e5, -200e5])
+def test_unlike_pressure_residuals_are_two_couple_faults(params, residual_b):
+    """A residual of the other sign, or more than twice the first, on B: two couple faults,
+    the safe state as before."""
+    m = _pressure_run(params, residual_b)
+    assert [e.kind for e in m.events] == ['switch_start', 'switch_done', 'safe']
+    assert m.name == 'FAILED_SAFE' and not m.pressure_sensor_fault
+
+
 def test_target_failing_during_switch_goes_back_once(params):
     b = Bench(params)
     b.tick(100)
@@ -437,6 +477,25 @@ def test_both_failed_in_loop_safe_state_holds_piston():
     x = r['x'][after]
     print(f'hold: piston moved {1e3 * (x[-1] - x[0]):.3f} mm in {r["t"][after][-1] - safe_t:.2f} s')
     assert abs(x[-1] - x[0]) < 2e-3
+
+
+def test_one_pressure_sensor_offset_in_loop_keeps_control():
+    """Closed loop, Table 3.4 (3 Hz 3 mm sine, 10 kN from 1 s): chamber A's pressure sensor
+    reads 100 bar high from 1.5 s. The torque balance switches A out, B shows the same
+    residual, the manager blames the sensors: B keeps driving, the piston keeps tracking."""
+    scn = B.Scenario(duration=4.0, faults=[(1.5, 'pressure_sensor_a', 0, 100e5, 0.0)])
+    r = B.run(scn, switch_hold=HOLD)
+    m = r['manager']
+    kinds = [e.kind for e in m.events]
+    err = r['x'] - np.array([scn.reference(t) for t in r['t']])
+    after = r['t'] > 1.5
+    before = np.abs(err[~after & (r['t'] > 1.2)]).max()      # loaded, the sine's own lag
+    worst = np.abs(err[after]).max()
+    print(f'pressure sensor A +100 bar: events {kinds}, state {m.name}, max |error| after '
+          f'{1e6 * worst:.0f} um (before {1e6 * before:.0f})')
+    assert kinds == ['switch_start', 'switch_done', 'sensor_fault'] and m.name == 'ACTIVE_B'
+    assert not np.any(r['state'] == B.STATE_CODES['FAILED_SAFE'])
+    assert worst < 1.1 * before
 
 
 # --------------------------------------------------------------------------- compiled path

@@ -271,17 +271,19 @@ class SwitchManagerNode:
                       'healthy_B': mgr.channel_healthy[1],
                       'why_A': mgr.health.why(0), 'why_B': mgr.health.why(1),
                       'pressure_plausible': mgr.health.pressure_plausible,
+                      'pressure_sensors_failed': mgr.pressure_sensor_fault,
                       'state_stale': self.state_stale, 'armed': self.armed,
                       'events': len(mgr.events),
                       'last_event': mgr.events[-1].line() if mgr.events else ''}
-            name, reason = mgr.name, mgr.reason
+            name, reason, sensors = mgr.name, mgr.reason, mgr.pressure_sensor_fault
         values.update(self.c)
         values.update(self.loop.values())
         if name == 'FAILED_SAFE':
             level, text = diag.ERROR, reason      # why; safe state <switch.safe_mode>
-        elif name == 'DEGRADED' or self.state_stale:
-            level, text = diag.WARN, ('no redundancy left' if name == 'DEGRADED'
-                                      else 'no /eha/state')
+        elif name == 'DEGRADED' or self.state_stale or sensors:
+            level, text = diag.WARN, ('no redundancy left' if name == 'DEGRADED' else
+                                      'no /eha/state' if self.state_stale else
+                                      'pressure sensors failed: pressure monitor off')
         else:
             level, text = diag.OK, name
         diag.publish(self, self.pub_diag, 'redundancy', values, level, text)

@@ -12,6 +12,7 @@ class SwitchEvent:
     t: float                  # plant time of the event, seq * Ts [s]
     seq: int                  # plant tick [-]
     kind: str                 # switch_start | switch_done | degraded | restored | safe | refused
+    #                           | sensor_fault (the shared pressure sensors, not a couple)
     from_state: str
     to_state: str
     from_channel: int

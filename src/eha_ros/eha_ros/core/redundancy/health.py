@@ -279,6 +279,21 @@ class HealthMonitor:
         """Monitors judged in standby too (drive status, current) are healthy."""
         return bool(available(self.ms, c))
 
+    def failed(self, c: int) -> list[str]:
+        """The names of couple c's tripped monitors."""
+        return [n for n, h in self.channels[c].monitors.items() if not h.healthy]
+
+    def pressure_residual(self, c: int) -> float:
+        """Couple c's low-passed torque-balance residual (Pa): the pressure monitor's signal."""
+        return float(self.hs[H_F_PRESS + c])
+
+    def disable(self, name: str):
+        """Monitor ``name`` off on both couples, its verdicts healthy (until a new monitor)."""
+        j = MONITORS.index(name)
+        for c in range(2):
+            self.mk[c, j, MK_ENABLED] = 0.0
+            self.channels[c].monitors[name].reset()
+
     def rearm(self, c: int):
         """Forget the driving-only verdicts of couple c (before a commanded retry)."""
         for n in DRIVING_ONLY:

@@ -114,6 +114,10 @@ class SwitchManager:
         self.enable_since = [-math.inf, -math.inf]
         self.reason = 'start'
         self.events: list[SwitchEvent] = []
+        # the pressure residual that switched away from each couple (NaN: none) and whether
+        # the shared pressure sensors have been found faulty (pressure monitor off)
+        self.pressure_trip = [math.nan, math.nan]
+        self.pressure_sensor_fault = False
 
     # ------------------------------------------------------------------ queries
     @property
@@ -163,6 +167,8 @@ class SwitchManager:
     def _supervise(self):
         a, o = self.active, 1 - self.active
         if not self.health.healthy(a):
+            if self._pressure_sensors_faulty(a, o):
+                return
             why = f'channel {NAMES[a]} unhealthy: {self.health.why(a)}'
             if self.ok(o):
                 if self.t - self.last_auto >= self.min_dwell - 1e-9:
@@ -177,6 +183,31 @@ class SwitchManager:
             why = (f'channel {NAMES[o]} healthy again' if want == ACTIVE else
                    f'standby channel {NAMES[o]} not available: {self._why_not(o)}')
             self._transition(want, kind, why, a, a)
+
+    def _pressure_sensors_faulty(self, a: int, o: int) -> bool:
+        """Both couples failed on the pressure monitor alone, the residual on the active one of
+        the sign and within a factor 2 of the one that switched away from the other: the
+        torque balance of eq. 3.17 is wrong on both through what they share, the chamber
+        pressure sensors (a couple's own fault shows on that couple only). The pressure
+        monitor goes off on both couples, the standby is cleared, the active one keeps
+        driving; reported as a ``sensor_fault`` event."""
+        h = self.health
+        trip = self.pressure_trip[o]
+        if not (h.failed(a) == ['pressure'] == h.failed(o) and math.isfinite(trip)):
+            return False
+        r = h.pressure_residual(a)
+        if not (r * trip > 0.0 and 0.5 <= r / trip <= 2.0):
+            return False
+        h.disable('pressure')
+        self.latched[o] = False
+        self.pressure_trip = [math.nan, math.nan]
+        self.pressure_sensor_fault = True
+        self._transition(ACTIVE if self.ok(o) else DEGRADED, 'sensor_fault',
+                         f'channels A and B both failed the pressure monitor alone (residual '
+                         f'{trip:.3g} Pa on {NAMES[o]}, {r:.3g} Pa on {NAMES[a]}): the '
+                         f'pressure sensors they share; pressure monitor off, channel '
+                         f'{NAMES[a]} keeps driving', a, a)
+        return True
 
     def _switching(self, s: ChannelSample):
         new, old = self.target, self.switch_from
@@ -233,6 +264,8 @@ class SwitchManager:
         if not commanded:
             en[old] = False                  # the faulty couple's drive goes off at once
             self.last_auto = self.t
+            self.pressure_trip[old] = (self.health.pressure_residual(old)
+                                       if self.health.failed(old) == ['pressure'] else math.nan)
             if self.latch_failed and old != new:
                 self.latched[old] = True
         t0 = self.t
