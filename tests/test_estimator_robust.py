@@ -187,18 +187,20 @@ def test_a_load_step_on_the_softest_corner_is_no_sensor_jump():
     assert err.max() < 1e-3                        # the load step's transient: 0.67 mm
 
 
-def _jump_codes(innovations, pds, pz=None, sigma=None):
+def _jump_codes(innovations, pds, pz=None, sigma=None, pbs=None):
     """The detector's codes for a sequence of position innovations (m; innovation sigma 30 um
-    unless given per sample) and measured p_D (Pa, NaN: the sample's pressures rejected);
-    the nominal plant's oil."""
+    unless given per sample) and measured p_D (Pa, NaN: the sample's pressures rejected: p_A
+    = p_D, p_B = 0 unless ``pbs`` gives chamber B's readings, NaN: rejected); the nominal
+    plant's oil."""
     det = fd.FaultDetector(1e-3, jump_debounce=3, jump_step=100e-6, jump_pressure_veto=8.0,
                            pd_per_m=2.0 * 1.379e9 * 2.572e-3 / 4.01e-4)
     det.start(0.0)
     n = len(innovations)
     pz = pz if pz is not None else [0.0] * n
     sigma = sigma if sigma is not None else [30e-6] * n
-    return [det.update(1e-3 * k, y, sg ** 2, z, pd)
-            for k, (y, pd, z, sg) in enumerate(zip(innovations, pds, pz, sigma))]
+    pbs = pbs if pbs is not None else [0.0 if pd == pd else math.nan for pd in pds]
+    return [det.update(1e-3 * k, y, sg ** 2, z, pa, pb)
+            for k, (y, pa, pb, z, sg) in enumerate(zip(innovations, pds, pbs, pz, sigma))]
 
 
 def test_a_jump_needs_a_step_away_from_zero_and_still_pressures():
@@ -229,6 +231,24 @@ def test_a_jump_needs_a_step_away_from_zero_and_still_pressures():
     # with the step's direction ignored and no pressures it would have been called a jump
     rise = fall[:5] + [-570e-6, -650e-6, -700e-6, -720e-6]
     assert fd.JUMP in _jump_codes(rise, [math.nan] * 9, sigma=sigma)
+
+
+def test_one_valid_pressure_sensor_still_vetoes_a_jump():
+    """Chamber B's sensor out of its range (NaN: rejected): a 5 kN load step compresses A's oil,
+    A's reading rises (19 bar for 0.22 mm at nominal) and vetoes the jump; a jump leaves it
+    still. The threshold is one chamber's half of p_D's: a quarter of 88 bar per mm, 6.6 bar
+    for the 0.3 mm here."""
+    quiet = [10e-6, -15e-6, 5e-6]
+    jump = quiet + [0.3e-3] * 5
+    nan = [math.nan] * 8
+    assert fd.JUMP in _jump_codes(jump, [10e5] * 8, pbs=nan)
+    assert fd.JUMP not in _jump_codes(jump, [10e5] * 3 + [29e5] * 5, pbs=nan)
+    # B alone valid, A rejected: the same with B's reading
+    assert fd.JUMP not in _jump_codes(jump, nan, pbs=[10e5] * 3 + [29e5] * 5)
+    assert fd.JUMP in _jump_codes(jump, nan, pbs=[10e5] * 3 + [15e5] * 5)     # below 6.6 bar
+    assert fd.JUMP not in _jump_codes(jump, nan, pbs=[10e5] * 3 + [17e5] * 5)
+    # both rejected: no veto by the pressures (as before)
+    assert fd.JUMP in _jump_codes(jump, nan, pbs=nan)
 
 
 def test_a_10kN_step_on_a_soft_oily_plant_is_no_sensor_jump_with_the_compensation():

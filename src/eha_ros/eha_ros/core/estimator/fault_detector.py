@@ -39,6 +39,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ..plant.chambers import stiffness as chamber_stiffness
 from . import sensor_band
 
 NONE, JUMP, STUCK, DRIFT = 0, 1, 2, 3
@@ -81,9 +82,11 @@ NFK = 10
 FS_HOLD = 10            # 3 entries: JUMP, STUCK, DRIFT (ticks the verdict stays reported)
 FS_DET = 13             # 3 entries: detections counted
 # the last measured p_D (of a sample that had the pressures), the one before a jump's run
-# (its reference) and the run's innovation step away from zero
+# (its reference) and the run's innovation step away from zero; the last valid reading of
+# each chamber's sensor (A, B) and those before the run (for a sample with one valid sensor)
 FS_PD1, FS_PDREF, FS_STEP = 16, 17, 18
-NFS = 19
+FS_P1, FS_PREF = 19, 21
+NFS = 23
 CODES = (JUMP, STUCK, DRIFT)
 
 
@@ -115,17 +118,20 @@ def _report(k, s, now_jump, now_stuck, now_drift) -> int:
 
 
 @njit(cache=True)
-def detect(k, s, z, innovation, S, pz, pd) -> int:
+def detect(k, s, z, innovation, S, pz, pa, pb) -> int:
     """One position sample z (m) with its innovation (m) and innovation variance S (m^2); pz:
-    the largest normalised pressure innovation of the same update (0: none); pd: the measured
-    pressure difference p_A - p_B of the sample (Pa; NaN: none). Returns the code.
+    the largest normalised pressure innovation of the same update (0: none); pa, pb: the
+    measured chamber pressures of the sample (Pa; NaN: that reading not valid). Returns the
+    code.
 
     r = innovation / sqrt(S)
     jump:  |r| > FK_JUMP for FK_JUMP_N samples, the run began with an innovation step
            away from zero, step = sign(innovation) (innovation - previous innovation),
            >= FK_JUMP_STEP, and on its first VETO_SAMPLES samples no pressure innovation
            >= FK_JUMP_PVETO and |pd - the last pd before the run| below
-           COMPRESSION_SHARE FK_PD_PER_M step
+           c = COMPRESSION_SHARE FK_PD_PER_M step (pd = pa - pb); with one valid reading,
+           its change from its last valid value before the run below c / 2 (one chamber's
+           share of the compression)
     stuck: z equal to the previous z for FK_STUCK_N samples
     drift: g+ = max(0, g+ + r - FK_DRIFT_K), g- = max(0, g- - r - FK_DRIFT_K) above FK_DRIFT_H
            for FK_DRIFT_N samples"""
@@ -139,16 +145,30 @@ def detect(k, s, z, innovation, S, pz, pd) -> int:
         s[FS_STEP] = math.copysign(1.0, innovation) * (innovation - s[FS_YPREV])
         s[FS_STEPPED] = 1.0 if s[FS_STEP] >= k[FK_JUMP_STEP] else 0.0
         s[FS_PDREF] = s[FS_PD1]
+        s[FS_PREF] = s[FS_P1]
+        s[FS_PREF + 1] = s[FS_P1 + 1]
     if 0 < s[FS_NJUMP] <= VETO_SAMPLES:
         # the oil compressed: the pressures' innovation, or the measured p_D itself moved
-        # from its last value before the run (NaN, no pressures in this sample: no veto by it)
+        # from its last value before the run; with one sensor valid (the other one failed or
+        # out of its range), that chamber's pressure; none valid: no veto by them
         compressed = COMPRESSION_SHARE * k[FK_PD_PER_M] * s[FS_STEP]
-        if pz >= k[FK_JUMP_PVETO] or (compressed > 0.0
-                                      and abs(pd - s[FS_PDREF]) >= compressed):
+        if pa == pa and pb == pb:
+            moved = abs(pa - pb - s[FS_PDREF]) >= compressed
+        elif pa == pa:
+            moved = abs(pa - s[FS_PREF]) >= 0.5 * compressed
+        elif pb == pb:
+            moved = abs(pb - s[FS_PREF + 1]) >= 0.5 * compressed
+        else:
+            moved = False
+        if pz >= k[FK_JUMP_PVETO] or (compressed > 0.0 and moved):
             s[FS_STEPPED] = 0.0
     s[FS_YPREV] = innovation
-    if pd == pd:
-        s[FS_PD1] = pd
+    if pa == pa and pb == pb:
+        s[FS_PD1] = pa - pb
+    if pa == pa:
+        s[FS_P1] = pa
+    if pb == pb:
+        s[FS_P1 + 1] = pb
     same = s[FS_HAS_ZPREV] > 0.5 and z == s[FS_ZPREV]
     s[FS_NSAME] = s[FS_NSAME] + 1 if same else 0
     s[FS_ZPREV] = z
@@ -176,6 +196,15 @@ def no_sample(k, s) -> int:
     return _report(k, s, False, False, False)
 
 
+def pd_per_m(p: dict) -> float:
+    """d p_D / dx by compressing the oil of both chambers at mid-stroke (eq. 3.20-3.21):
+    A_p (beta / V_A + beta / V_B) = 2 beta A_p / V_d (Pa per m)."""
+    A_p = p['plant.cylinder.A_p']
+    k_a, k_b = chamber_stiffness.py_func(0.0, p['plant.cylinder.V_d'], A_p, p['plant.fluid.beta'],
+                                         math.inf)
+    return A_p * (k_a + k_b)
+
+
 class FaultDetector:
     """Feed one sample per tick with :meth:`update`; read the code from its return value.
     Constants and state are the arrays ``k`` and ``s`` (FK_*, FS_*) of :func:`detect`."""
@@ -193,7 +222,7 @@ class FaultDetector:
                      pd_per_m)
         self.s = np.zeros(NFS)
         # compiled (or loaded) now: no_sample() is first called by a stale tick, mid-run
-        detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0, math.nan)
+        detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0, math.nan, math.nan)
         no_sample(self.k, self.s.copy())
 
     @classmethod
@@ -203,9 +232,7 @@ class FaultDetector:
                    drift_h=p[f + 'drift_h'], hold_time=p['estimator.hold_time'],
                    jump_step=sensor_band.from_params(p).jump_step,
                    jump_pressure_veto=p[f + 'jump_pressure_veto'],
-                   # eq. 3.20-3.21 at mid-stroke, both chambers: d p_D = 2 beta A_p / V_d dx
-                   pd_per_m=2.0 * p['plant.fluid.beta'] * p['plant.cylinder.A_p']
-                   / p['plant.cylinder.V_d'])
+                   pd_per_m=pd_per_m(p))
 
     def reset(self):
         self.s[:] = 0.0
@@ -215,9 +242,9 @@ class FaultDetector:
         self.s[FS_ZPREV], self.s[FS_HAS_ZPREV] = z, 1.0
 
     def update(self, z: float, innovation: float, S: float, pz: float = 0.0,
-               pd: float = math.nan) -> int:
+               pa: float = math.nan, pb: float = math.nan) -> int:
         return detect(self.k, self.s, float(z), float(innovation), float(S), float(pz),
-                      float(pd))
+                      float(pa), float(pb))
 
     def tick_without_sample(self) -> int:
         return no_sample(self.k, self.s)

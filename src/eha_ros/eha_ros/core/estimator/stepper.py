@@ -252,8 +252,13 @@ def ready(K, E, position, w, pa, pb) -> bool:
 
 @njit(cache=True)
 def pressure_ok(k, pa, pb) -> bool:
-    return (math.isfinite(pa) and k.pressure_min <= pa <= k.pressure_max and
-            math.isfinite(pb) and k.pressure_min <= pb <= k.pressure_max)
+    return reading_ok(k, pa) and reading_ok(k, pb)
+
+
+@njit(cache=True)
+def reading_ok(k, p) -> bool:
+    """One chamber pressure reading is finite and in [pressure_min, pressure_max]."""
+    return math.isfinite(p) and k.pressure_min <= p <= k.pressure_max
 
 
 @njit(cache=True)
@@ -421,14 +426,15 @@ def estimate(K, E, a, position, w, pa, pb):
                            int(k.i_moved), k.moved_gate)
         innov, s00, m = y[0], S[0, 0], zm.shape[0]
         pz = fd.pressure_z(y, S, m)
-        pd = pa - pb if k.chambers > 0.5 else e.pd_meas
     else:
         z1[0] = position
         nis = update_gated(x, P, H1, R1, z1, y1, S1, ws, int(k.i_frozen), k.adapt_gate,
                            -1, 0.0)
         innov, s00, m = y1[0], S1[0, 0], 1
         pz = 0.0
-        pd = math.nan
+    # the fault detector's pressures: each valid reading (one may be valid without the other)
+    pa_ok = pa if use_p and reading_ok(k, pa) else math.nan
+    pb_ok = pb if use_p and reading_ok(k, pb) else math.nan
     if k.chambers > 0.5:
         lam, dlt, kap = k.leakage_range, k.displacement_range, k.compliance_range
         phi, eps = k.friction_range, k.external_leakage_range
@@ -438,7 +444,7 @@ def estimate(K, E, a, position, w, pa, pb):
                                eps[0], eps[1], int(k.i_gm), k.offset_bound, e.clipped,
                                adapt.EDGE_TICKS)
     e.updates += 1
-    fd.detect(k.detector, e.detector, position, innov, s00, pz, pd)
+    fd.detect(k.detector, e.detector, position, innov, s00, pz, pa_ok, pb_ok)
     if k.chambers > 0.5:
         # does the load swing? (read by consistency: the position noise)
         adapt.load_swinging(x, e.load, k.swing_band, k.load_hold)
