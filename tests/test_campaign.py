@@ -110,7 +110,7 @@ def test_family_file_errors_are_one_line(tmp_path):
 def test_every_shipped_scenario_loads_and_has_specs():
     names = SC.available()
     for must in ('step', 'load_step', 'sweep', 'stiffness', 'sine', 'switch', 'sensor_fault',
-                 'motor_fail'):
+                 'motor_fail', 'pressure_fault', 'pressure_lost'):
         assert must in names
         scn = SC.load(must)
         assert scn.specs and scn.duration > 0
@@ -125,6 +125,10 @@ def test_scenario_errors_are_one_line(tmp_path):
         SC.load(str(p))
     p.write_text('kind: step\nparams: {amplitud: 0.002}\n')
     with pytest.raises(UsageError, match='params.amplitud: unknown'):
+        SC.load(str(p))
+    p.write_text('kind: motor_fail\nparams: {fault: pressure_sensor_c}\n')
+    with pytest.raises(UsageError, match="params.fault = 'pressure_sensor_c': expected one of "
+                                         "msp_noise"):
         SC.load(str(p))
     p.write_text('kind: step\nspecs: {overshoot_pct: 5}\n')
     with pytest.raises(UsageError, match='specs.overshoot_pct'):
@@ -175,6 +179,16 @@ def test_nominal_runs_give_the_stack_figures():
     assert figs['detection_time_s'] <= 0.05 and figs['false_alarm_ticks'] == 0
     figs, _ = SC.run(SC.load('motor_fail'), nom, one, 1)
     assert figs['final_channel'] == 1 and figs['drive_time_s'] <= 0.1
+    assert figs['safe_state'] == 0
+    # a pressure sensor 100 bar off: a switch to B, then the sensors blamed, not B
+    figs, _ = SC.run(SC.load('pressure_fault'), nom, one, 1)
+    print(f"pressure_fault: extra deviation {figs['extra_deviation_m'] * 1e6:.0f} um")
+    assert figs['final_channel'] == 1 and figs['safe_state'] == 0
+    assert figs['extra_deviation_m'] <= 1e-3
+    # chamber B's sensor below its range before the 10 kN load: A's reading alone shows the
+    # load's compression, no sensor jump, no safe state, still on A
+    figs, _ = SC.run(SC.load('pressure_lost'), nom, one, 1)
+    assert figs['safe_state'] == 0 and figs['final_channel'] == 0
     for name in ('saturation', 'jump'):    # reference limits lifted: the anti-windup's case
         scn = SC.load(name)
         figs, _ = SC.run(scn, C.nominal_params(overrides=scn.overrides), one, 1)

@@ -33,6 +33,7 @@ from ..config.cli import UsageError
 from ..config.registry import LOOP_NODES
 from ..config.params import default_config_dir
 from ..sweep.analysis import LOAD_STEP, load_step_figures
+from ..plant.faults import FAULTS
 from .sensor_bound import steady_error_bound
 
 # kind -> default params (SI units). Times in s from the start of the run.
@@ -57,9 +58,10 @@ KINDS = {
     # false alarms before it
     'sensor_fault': dict(fault='msp_bias', magnitude=1e-3, t_fault=2.0, duration=3.0,
                          amplitude=0.0, freq=1.0),
-    # motor of the active couple fails during the Table 3.4 sine under load
+    # a plant fault (core.plant.faults; on couple A) during the Table 3.4 sine under load: the
+    # active couple's motor (the switch manager hands over to B), or a chamber pressure sensor
     'motor_fail': dict(amplitude=3e-3, freq=3.0, load=10e3, load_time=1.0, t_fault=2.0,
-                       duration=3.0),
+                       duration=3.0, fault='motor_fail', magnitude=0.0),
 }
 SPEC_FORMS = ('max', 'min', 'max_rel', 'min_rel')
 NODES = ('plant_sim',) + LOOP_NODES    # what one run builds (core.config.registry)
@@ -153,6 +155,9 @@ def from_dict(doc, path: str = '<dict>') -> Scenario:
             raise UsageError(f'scenario {path}: params.{key} = {value!r}: expected '
                              f'{type(default).__name__} like {default!r}')
         params[key] = value
+    if 'fault' in params and params['fault'] not in FAULTS:
+        raise UsageError(f'scenario {path}: params.fault = {params["fault"]!r}: expected one '
+                         f'of {", ".join(FAULTS)}')
     specs = doc.get('specs') or {}
     if not isinstance(specs, dict):
         raise UsageError(f'scenario {path}: specs: expected a mapping metric: {{max: v}}')
@@ -258,7 +263,7 @@ def signals(scn: Scenario, Ts: float):
         if kind == 'switch':
             commands.append((p['switch_time'], (1, 'campaign: commanded switch')))
         else:
-            faults.append((p['t_fault'], ('motor_fail', 0, 0.0, 0.0)))
+            faults.append((p['t_fault'], (p['fault'], 0, p['magnitude'], 0.0)))
     elif kind == 'sensor_fault':
         ref[:] = p['amplitude'] * np.sin(2 * np.pi * p['freq'] * t)
         faults.append((p['t_fault'], (p['fault'], 0, p['magnitude'], 0.0)))
@@ -459,8 +464,12 @@ def switch_figures(s, p, Ts):
 
 
 def motor_fail_figures(s, p, Ts):
-    """Motor failure of the active couple: the automatic switch."""
-    return handover_figures(s, p, p['t_fault'])
+    """A plant fault (motor failure of the active couple: the automatic switch): the
+    hand-over figures and whether the switch manager went to the safe state (1) or not (0)."""
+    from ..redundancy.state_machine import STATE_CODES
+    f = handover_figures(s, p, p['t_fault'])
+    f['safe_state'] = float(np.any(s['state'] == STATE_CODES['FAILED_SAFE']))
+    return f
 
 
 def sensor_fault_figures(s, p, Ts):
