@@ -307,6 +307,14 @@ def test_each_fault_visible_in_state(probe):
     pa1 = np.median([s.pressure_a for s in probe.window(k + 50, k + 150)])
     assert abs(pa1 - pa0 - 20e5) < 3e5
     probe.wait_ticks(400)
+    # pressure_sensor_b: chamber B's reading alone shifted
+    pa0 = np.median([s.pressure_a for s in probe.recent(0.1)])
+    pb0 = np.median([s.pressure_b for s in probe.recent(0.1)])
+    k = fault_tick(probe.fault('pressure_sensor_b', magnitude=-30e5, duration=0.4))
+    pa1 = np.median([s.pressure_a for s in probe.window(k + 50, k + 150)])
+    pb1 = np.median([s.pressure_b for s in probe.window(k + 50, k + 150)])
+    assert abs(pb1 - pb0 + 30e5) < 3e5 and abs(pa1 - pa0) < 3e5
+    probe.wait_ticks(400)
     # pump_leakage under load: the commanded speed moves the piston much less
     probe.load_pub.publish(probe.Load(force=10e3))
     probe.hold(100.0, 0.3)
