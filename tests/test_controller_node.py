@@ -103,10 +103,24 @@ def test_the_leakage_compensation_supplies_the_estimated_leak_flow(ros_node):
         seq = est.seq
         assert wait_for(lambda: est.commands[-1].seq > seq + 50, 10)
         assert all(c.motor_speed_ref == 0.0 for c in est.commands if c.seq > seq + 5)
+        # the switch manager blames the pressure sensors on /eha/redundancy: the estimate's
+        # leak flow comes from a wrong p_D, the compensation stops (logged once, diagnostics)
+        from eha_msgs.msg import RedundancyStatus
+        from eha_ros.nodes.common import latched_qos
+        status = ros_node.create_publisher(RedundancyStatus, '/eha/redundancy', latched_qos())
+        est.leak_flow = 50.0 * D_p
+        status.publish(RedundancyStatus(active_channel=1, channel_healthy=[True, True],
+                                        state='ACTIVE_B', pressure_sensors_failed=True))
+        assert wait_for(lambda: any(d.get('leakage_compensation') == 'False'
+                                    for d in est.diags), 20), est.diags[-1:]
+        seq = est.seq
+        assert wait_for(lambda: est.commands[-1].seq > seq + 50, 10)
+        assert all(c.motor_speed_ref == 0.0 for c in est.commands if c.seq > seq)
     finally:
         est.close()
         code, out, err = stop_process(proc)
         assert 'Traceback' not in err, err
+    assert err.count('blamed the chamber pressure sensors') == 1, err
 
 
 def test_watchdog_zero_speed_and_bumpless_recovery(ctl):

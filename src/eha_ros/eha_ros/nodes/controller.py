@@ -166,6 +166,11 @@ class Controller(LifecycleNodeMixin):
             self.ctl.hold_integrator(self.switch_ticks)
         self.active_channel = msg.active_channel
         self.manager_state = msg.state
+        if msg.pressure_sensors_failed and self.ctl.stop_leakage_compensation():
+            self.c.bump('compensation_stops')
+            self.get_logger().warning('the switch manager blamed the chamber pressure sensors: '
+                                      'leakage compensation off (control.leakage_compensation '
+                                      'had it on)')
 
     def on_plant_state(self, msg):
         """The plant side applies commands only while ACTIVE."""
@@ -291,7 +296,8 @@ class Controller(LifecycleNodeMixin):
         values.update(watchdog_tripped=self.tripped, drive_gain_mismatch=self.mismatch,
                       safe_state=self.safe or '',
                       plant_state=self.plant_state or 'not heard (taken as active)',
-                      lifecycle=state_label(self), active=not self.inactive)
+                      lifecycle=state_label(self), active=not self.inactive,
+                      leakage_compensation=self.ctl.compensating)
         values.update(self.c)
         if self.safe is not None:
             diag.publish(self, self.pub_diag, 'loop', values, diag.ERROR,

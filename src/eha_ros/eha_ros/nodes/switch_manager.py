@@ -207,7 +207,7 @@ class SwitchManagerNode:
         with self.lock:
             sel = self.mgr.select
             status = (sel.channel, tuple(self.mgr.channel_healthy), self.mgr.switch_count,
-                      self.mgr.name, self.mgr.reason)
+                      self.mgr.name, self.mgr.reason, self.mgr.pressure_sensor_fault)
             events = self.mgr.events[self.logged:]
             self.logged = len(self.mgr.events)
             seq = self.mgr.seq
@@ -243,7 +243,8 @@ class SwitchManagerNode:
         m = self.Status()
         m.header.stamp = self.get_clock().now().to_msg()
         m.seq = int(seq)
-        m.active_channel, healthy, m.switch_count, m.state, m.reason = status
+        m.active_channel, healthy, m.switch_count, m.state, m.reason, failed = status
+        m.pressure_sensors_failed = bool(failed)
         m.channel_healthy = [bool(b) for b in healthy]
         publish_counted(self, self.pub_status, m, 'redundancy status', seq)
         self.sent_status = status
@@ -251,7 +252,8 @@ class SwitchManagerNode:
     def on_status_timer(self):
         with self.lock:
             status = (self.mgr.select.channel, tuple(self.mgr.channel_healthy),
-                      self.mgr.switch_count, self.mgr.name, self.mgr.reason)
+                      self.mgr.switch_count, self.mgr.name, self.mgr.reason,
+                      self.mgr.pressure_sensor_fault)
             seq = self.mgr.seq
         self.publish_status(status, seq)
         t = self.last_state_time

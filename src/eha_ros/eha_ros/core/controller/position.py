@@ -143,6 +143,19 @@ class PositionController:
         """Ticks left with G's state frozen."""
         return int(self.s[S.C_HOLD])
 
+    @property
+    def compensating(self) -> bool:
+        """The leakage compensation is on (control.leakage_compensation > 0, not stopped)."""
+        return bool(self.k[S.K_LEAK] > 0.0)
+
+    def stop_leakage_compensation(self) -> bool:
+        """The chamber pressure sensors were blamed (/eha/redundancy pressure_sensors_failed):
+        the leak flow the estimator reports comes from a wrong p_D, so the compensation stays
+        off from here on. Returns True when this call turned it off."""
+        on = self.compensating
+        self.k[S.K_LEAK] = 0.0
+        return on
+
     def hold_integrator(self, ticks: int):
         """Channel switch: the output stays continuous; G's state is frozen while valves change
         over."""
