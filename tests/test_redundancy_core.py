@@ -541,7 +541,8 @@ def test_manager_tick_equals_the_python_state_machine(params):
     trip and clear every monitor, faults on either drive, commanded switches, the safe state,
     the loop open, commands lost, late and spread (the band of references the node's deque
     gave), a drive spinning up after its enable (a commanded switch waits for the speeds to
-    match). The same select, state, events and health arrays on every tick."""
+    match), the pressure sensors blamed (a pressure residual on both drivers). The same select,
+    state, events and health arrays on every tick."""
     from eha_ros.core.redundancy import stepper as RS
     rng = np.random.default_rng(7)
     k_T, D_p = params['plant.motor.k_T'], params['plant.pump.D_p']
@@ -615,5 +616,6 @@ def test_manager_tick_equals_the_python_state_machine(params):
     print(f'events {dict(kinds)}; {compiled} of {ticks} ticks compiled; valves opened after '
           f'(ms: switches) {dict(opened)}')
     assert set(opened) - {'0', '50'}, 'no switch waited for the speeds to match'
-    assert {'switch_start', 'switch_done', 'safe', 'degraded', 'restored'} <= set(kinds)
+    assert {'switch_start', 'switch_done', 'safe', 'degraded', 'restored',
+            'sensor_fault'} <= set(kinds)         # sensor_fault: 'pressure' on either driver
     assert 0.9 * ticks < compiled < ticks - 50       # both paths taken
