@@ -110,7 +110,7 @@ def test_family_file_errors_are_one_line(tmp_path):
 def test_every_shipped_scenario_loads_and_has_specs():
     names = SC.available()
     for must in ('step', 'load_step', 'sweep', 'stiffness', 'sine', 'switch', 'sensor_fault',
-                 'motor_fail', 'pressure_fault', 'pressure_lost'):
+                 'motor_fail', 'pressure_fault', 'pressure_lost', 'pressure_lost_loaded'):
         assert must in names
         scn = SC.load(must)
         assert scn.specs and scn.duration > 0
@@ -188,6 +188,9 @@ def test_nominal_runs_give_the_stack_figures():
     # chamber B's sensor below its range before the 10 kN load: A's reading alone shows the
     # load's compression, no sensor jump, no safe state, still on A
     figs, _ = SC.run(SC.load('pressure_lost'), nom, one, 1)
+    assert figs['safe_state'] == 0 and figs['final_channel'] == 0
+    # the loaded chamber's sensor lost: B does not move, the motor shaft shows the load
+    figs, _ = SC.run(SC.load('pressure_lost_loaded'), nom, one, 1)
     assert figs['safe_state'] == 0 and figs['final_channel'] == 0
     for name in ('saturation', 'jump'):    # reference limits lifted: the anti-windup's case
         scn = SC.load(name)

@@ -169,7 +169,7 @@ def components(rec, refs, loads, repeats: int = 3) -> dict:
 def _estimator(ek, ee, ea, x, w, pa, pb):
     s = 0.0
     for k in range(x.shape[0]):
-        r = ES.estimate(ek, ee, ea, x[k], w[k], pa[k], pb[k])
+        r = ES.estimate(ek, ee, ea, x[k], w[k], math.nan, pa[k], pb[k])
         s += r[0]
     return s
 

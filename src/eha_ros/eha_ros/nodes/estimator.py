@@ -80,7 +80,7 @@ class EstimatorNode:
                                    throttle_duration_sec=1.0)
         self.last_seq = msg.seq
         r = self.est.update(msg.position, msg.motor_speed, msg.pressure_a, msg.pressure_b,
-                            msg.active_channel, ticks, msg.valid)
+                            msg.active_channel, ticks, msg.valid, msg.motor_current)
         self.c.bump('estimates')
         if r.consistency != self.verdict:      # one log line per verdict change (issue 15)
             self.on_verdict(r.consistency, msg.seq)

@@ -178,7 +178,7 @@ class Estimator:
         # the kernels' compiled functions for these arrays, called per tick (the record is
         # not typed again on every call: kernel_records.entry_point)
         kn = self.kernel
-        self._estimate = entry_point(stepper.estimate, *kn, 0.0, 0.0, 0.0, 0.0)
+        self._estimate = entry_point(stepper.estimate, *kn, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._predict_tick = entry_point(stepper.predict_tick, *kn, 0.0, 0.0, 0.0)
         self._advance = entry_point(stepper.advance, *kn, 0.0, 0.0, 0.0)
         self._consistency = entry_point(stepper.consistency, *kn, 0.0)
@@ -249,9 +249,12 @@ class Estimator:
 
     # ------------------------------------------------------------------ tick
     def update(self, position: float, motor_speed, pressure_a: float, pressure_b: float,
-               active_channel: int, ticks: int = 1, valid: bool = True) -> EstimateResult:
+               active_channel: int, ticks: int = 1, valid: bool = True,
+               motor_current=None) -> EstimateResult:
         """One measured state -> one estimate. ``ticks``: periods Ts since the previous state
         (more than 1 after lost states; the missing ones are predicted with the held speed).
+        ``motor_current``: both motors' measured currents (A; None: not known), the active one's
+        for the fault detector's torque balance when a pressure reading is missing.
         Predict-only (stale) steps taken since the previous state are provisional: they are
         undone here and replaced by exactly ``ticks`` predictions. A state the plant side
         marked not ``valid`` (a repeated or stale device sample) is predicted over with the
@@ -294,11 +297,16 @@ class Estimator:
             return self._result(0.0, 0.0, False, ','.join(reasons), 0)
         if ticks > 1:
             noise_level.gap(self.noise_s)
+            self.detector.s[fd.FS_W1] = math.nan      # no speed one tick before this one
         for _ in range(min(max(int(ticks), 1), self.max_gap_ticks) - 1):
             self._predict_tick(*self.kernel, self.omega_prev, math.nan, math.nan)
         fault_before = self.detector.code
         if pos_ok and not (self.isolate and fault_before in (fd.JUMP, fd.STUCK)):
-            _, y, nis, m, _ = self._estimate(*self.kernel, position, w, pressure_a, pressure_b)
+            i = math.nan
+            if motor_current is not None and not why_w and valid:
+                i = float(motor_current[int(active_channel)])
+            _, y, nis, m, _ = self._estimate(*self.kernel, position, w, i, pressure_a,
+                                             pressure_b)
             if self.chinniah is not None and pr_ok:
                 self.chinniah.step(position, self.kf.velocity, self.pd_meas)
             return self._result(y, nis, False, ','.join(reasons), m)

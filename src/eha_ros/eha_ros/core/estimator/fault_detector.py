@@ -75,8 +75,10 @@ DRIFT_DEBOUNCE = 5
 # compiled path (core.estimator.stepper) reads and writes in place through slices
 (FK_JUMP, FK_JUMP_N, FK_STUCK_N, FK_DRIFT_K, FK_DRIFT_H, FK_DRIFT_N, FK_HOLD, FK_JUMP_STEP,
  FK_JUMP_PVETO,
- FK_PD_PER_M) = range(10)   # p_D (Pa) per m of piston travel by compressing the oil (0: none)
-NFK = 10
+ FK_PD_PER_M,   # p_D (Pa) per m of piston travel by compressing the oil (0: none)
+ # the shaft's torque balance (eq. 3.17) as p_D: k_T / D_p, b_eq / D_p, J_eq / (D_p Ts)
+ FK_TB_I, FK_TB_W, FK_TB_DW) = range(13)
+NFK = 13
 (FS_NJUMP, FS_NSAME, FS_NDRIFT, FS_GPOS, FS_GNEG, FS_ZPREV, FS_HAS_ZPREV, FS_YPREV,
  FS_STEPPED, FS_CODE) = range(10)
 FS_HOLD = 10            # 3 entries: JUMP, STUCK, DRIFT (ticks the verdict stays reported)
@@ -86,7 +88,10 @@ FS_DET = 13             # 3 entries: detections counted
 # each chamber's sensor (A, B) and those before the run (for a sample with one valid sensor)
 FS_PD1, FS_PDREF, FS_STEP = 16, 17, 18
 FS_P1, FS_PREF = 19, 21
-NFS = 23
+# the active motor's previous speed (NaN: none), the torque balance's p_D of the last sample
+# and of the one before the run
+FS_W1, FS_PV1, FS_PVREF = 23, 24, 25
+NFS = 26
 CODES = (JUMP, STUCK, DRIFT)
 
 
@@ -118,11 +123,11 @@ def _report(k, s, now_jump, now_stuck, now_drift) -> int:
 
 
 @njit(cache=True)
-def detect(k, s, z, innovation, S, pz, pa, pb) -> int:
+def detect(k, s, z, innovation, S, pz, pa, pb, w, i) -> int:
     """One position sample z (m) with its innovation (m) and innovation variance S (m^2); pz:
     the largest normalised pressure innovation of the same update (0: none); pa, pb: the
-    measured chamber pressures of the sample (Pa; NaN: that reading not valid). Returns the
-    code.
+    measured chamber pressures of the sample (Pa; NaN: that reading not valid); w, i: the
+    active motor's measured speed (rad/s) and current (A) (NaN: not valid). Returns the code.
 
     r = innovation / sqrt(S)
     jump:  |r| > FK_JUMP for FK_JUMP_N samples, the run began with an innovation step
@@ -131,11 +136,17 @@ def detect(k, s, z, innovation, S, pz, pa, pb) -> int:
            >= FK_JUMP_PVETO and |pd - the last pd before the run| below
            c = COMPRESSION_SHARE FK_PD_PER_M step (pd = pa - pb); with one valid reading,
            its change from its last valid value before the run below c / 2 (one chamber's
-           share of the compression)
+           share of the compression); with either reading not valid, also the torque
+           balance's p_D, pv = (k_T i - b_eq w - J_eq dw/dt) / D_p (eq. 3.17: the pump's
+           torque on the shaft), moved by less than c (not c / 2: the drive's current
+           ripples by several A from one tick to the next)
     stuck: z equal to the previous z for FK_STUCK_N samples
     drift: g+ = max(0, g+ + r - FK_DRIFT_K), g- = max(0, g- - r - FK_DRIFT_K) above FK_DRIFT_H
            for FK_DRIFT_N samples"""
     r = innovation / math.sqrt(S) if S > 0.0 else 0.0
+    # the pump's pressure difference from the shaft's torque balance (NaN without a valid speed
+    # now and one sample before, or a current)
+    pv = k[FK_TB_I] * i - k[FK_TB_W] * w - k[FK_TB_DW] * (w - s[FS_W1])
     s[FS_NJUMP] = s[FS_NJUMP] + 1 if abs(r) > k[FK_JUMP] else 0
     # a jump starts with a one-sample innovation step, and the pressures stay quiet on it and
     # the next sample (a load step's pressure innovation can come a sample late)
@@ -147,6 +158,7 @@ def detect(k, s, z, innovation, S, pz, pa, pb) -> int:
         s[FS_PDREF] = s[FS_PD1]
         s[FS_PREF] = s[FS_P1]
         s[FS_PREF + 1] = s[FS_P1 + 1]
+        s[FS_PVREF] = s[FS_PV1]
     if 0 < s[FS_NJUMP] <= VETO_SAMPLES:
         # the oil compressed: the pressures' innovation, or the measured p_D itself moved
         # from its last value before the run; with one sensor valid (the other one failed or
@@ -160,6 +172,10 @@ def detect(k, s, z, innovation, S, pz, pa, pb) -> int:
             moved = abs(pb - s[FS_PREF + 1]) >= 0.5 * compressed
         else:
             moved = False
+        # a reading missing: the loaded chamber's may be the one, and the other one may sit on
+        # its check valve and not move; the shaft feels the load's torque within the tick
+        if not (pa == pa and pb == pb) and not moved:
+            moved = abs(pv - s[FS_PVREF]) >= compressed        # False when either is NaN
         if pz >= k[FK_JUMP_PVETO] or (compressed > 0.0 and moved):
             s[FS_STEPPED] = 0.0
     s[FS_YPREV] = innovation
@@ -169,6 +185,8 @@ def detect(k, s, z, innovation, S, pz, pa, pb) -> int:
         s[FS_P1] = pa
     if pb == pb:
         s[FS_P1 + 1] = pb
+    s[FS_PV1] = pv
+    s[FS_W1] = w
     same = s[FS_HAS_ZPREV] > 0.5 and z == s[FS_ZPREV]
     s[FS_NSAME] = s[FS_NSAME] + 1 if same else 0
     s[FS_ZPREV] = z
@@ -192,8 +210,18 @@ def detect(k, s, z, innovation, S, pz, pa, pb) -> int:
 
 @njit(cache=True)
 def no_sample(k, s) -> int:
-    """A tick with no usable position (rejected or stale): holds count down."""
+    """A tick with no usable position (rejected or stale): holds count down; the next
+    sample's speed has no previous one to differ from."""
+    s[FS_W1] = math.nan
     return _report(k, s, False, False, False)
+
+
+def torque_balance(p: dict, Ts: float) -> tuple:
+    """(k_T / D_p, b_eq / D_p, J_eq / (D_p Ts)): the shaft's torque balance (eq. 3.17)
+    k_T i - b_eq w - J_eq dw/dt = D_p p_D solved for p_D, dw/dt over one sample."""
+    D_p = p['plant.pump.D_p']
+    return (p['plant.motor.k_T'] / D_p, p['plant.motor.b_eq'] / D_p,
+            p['plant.motor.J_eq'] / (D_p * Ts))
 
 
 def pd_per_m(p: dict) -> float:
@@ -214,15 +242,18 @@ class FaultDetector:
                  drift_h: float = 150.0, drift_debounce: int = DRIFT_DEBOUNCE,
                  hold_time: float = 0.5,
                  jump_step: float = 0.0, jump_pressure_veto: float = 1e300,
-                 pd_per_m: float = 0.0):
+                 pd_per_m: float = 0.0, torque_balance: tuple = (math.nan,) * 3):
+        """torque_balance: :func:`torque_balance` (NaN: no veto by it)."""
         self.Ts = Ts
         self.k = np.zeros(NFK)
         self.k[:] = (jump_threshold, jump_debounce, stuck_samples, drift_k, drift_h,
                      drift_debounce, int(round(hold_time / Ts)), jump_step, jump_pressure_veto,
-                     pd_per_m)
+                     pd_per_m, *torque_balance)
         self.s = np.zeros(NFS)
+        self.reset()
         # compiled (or loaded) now: no_sample() is first called by a stale tick, mid-run
-        detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0, math.nan, math.nan)
+        detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0, math.nan, math.nan, math.nan,
+               math.nan)
         no_sample(self.k, self.s.copy())
 
     @classmethod
@@ -232,19 +263,21 @@ class FaultDetector:
                    drift_h=p[f + 'drift_h'], hold_time=p['estimator.hold_time'],
                    jump_step=sensor_band.from_params(p).jump_step,
                    jump_pressure_veto=p[f + 'jump_pressure_veto'],
-                   pd_per_m=pd_per_m(p))
+                   pd_per_m=pd_per_m(p), torque_balance=torque_balance(p, Ts))
 
     def reset(self):
         self.s[:] = 0.0
+        self.s[FS_W1] = self.s[FS_PV1] = math.nan
 
     def start(self, z: float):
         """The first sample: the reference of the stuck test, nothing judged."""
         self.s[FS_ZPREV], self.s[FS_HAS_ZPREV] = z, 1.0
 
     def update(self, z: float, innovation: float, S: float, pz: float = 0.0,
-               pa: float = math.nan, pb: float = math.nan) -> int:
+               pa: float = math.nan, pb: float = math.nan, w: float = math.nan,
+               i: float = math.nan) -> int:
         return detect(self.k, self.s, float(z), float(innovation), float(S), float(pz),
-                      float(pa), float(pb))
+                      float(pa), float(pb), float(w), float(i))
 
     def tick_without_sample(self) -> int:
         return no_sample(self.k, self.s)

@@ -403,11 +403,13 @@ def consistency(K, E, a, position) -> int:
 
 
 @njit(cache=True)
-def estimate(K, E, a, position, w, pa, pb):
+def estimate(K, E, a, position, w, i, pa, pb):
     """Estimator.update on a usable position sample (``w``: the speed it takes, the held one
-    when the sample's is not valid; invalid pressures are left out): :func:`advance`, the
-    update with position (and pressures), the adaptive parts, the fault detector and
-    :func:`consistency`. Returns (position, innovation, nis, nis_dim, code)."""
+    when the sample's is not valid; ``i``: the active motor's current for the fault
+    detector's torque balance, NaN with a held speed or none; invalid pressures are left
+    out): :func:`advance`, the update with position (and pressures), the adaptive parts, the
+    fault detector and :func:`consistency`. Returns (position, innovation, nis, nis_dim,
+    code)."""
     k, e = K[0], E[0]
     pr_ok = advance(K, E, a, w, pa, pb)
     x, P, Q, H, R, y, S, H1, R1, y1, S1, zm, z1, ws = (a.x, a.P, a.Q, a.H, a.R, a.y, a.S, a.H1,
@@ -444,7 +446,8 @@ def estimate(K, E, a, position, w, pa, pb):
                                eps[0], eps[1], int(k.i_gm), k.offset_bound, e.clipped,
                                adapt.EDGE_TICKS)
     e.updates += 1
-    fd.detect(k.detector, e.detector, position, innov, s00, pz, pa_ok, pb_ok)
+    fd.detect(k.detector, e.detector, position, innov, s00, pz, pa_ok, pb_ok,
+              w if i == i else math.nan, i)
     if k.chambers > 0.5:
         # does the load swing? (read by consistency: the position noise)
         adapt.load_swinging(x, e.load, k.swing_band, k.load_hold)

@@ -191,7 +191,7 @@ class BatchLoop:
         x0, v0, gm0 = plant.position, float(plant.S[S_V]), float(plant.S[S_GM])
         if est is not None:
             r = est.update(m.position, m.motor_speed, m.pressure_a, m.pressure_b,
-                           m.active_channel, valid=m.valid)
+                           m.active_channel, valid=m.valid, motor_current=m.motor_current)
             x_hat, nis, innov = r.position, r.nis, r.innovation
             code, nd, v_hat, skipped = r.sensor_fault, r.nis_dim, r.velocity, r.update_skipped
             est_ok = r.nis_dim > 0 and not r.sensor_fault

@@ -178,7 +178,8 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         gm0 = S[L.S_GM]
         w_act = meas[L.M_W0 + ch]
         if has_est:
-            x_hat, innov, nis, nd, code = ES.estimate(ek, ee, ea, pos, w_act, pa, pb)
+            x_hat, innov, nis, nd, code = ES.estimate(ek, ee, ea, pos, w_act,
+                                                      meas[L.M_I0 + ch], pa, pb)
             w_act = ee[0].omega             # the estimate's motor speed, as in EstimateResult
         else:
             x_hat, innov, nis, nd, code = pos, math.nan, math.nan, 0, 0
