@@ -206,8 +206,7 @@ class SwitchManagerNode:
         """Publish select/status when they changed; append new events to the log."""
         with self.lock:
             sel = self.mgr.select
-            status = (sel.channel, tuple(self.mgr.channel_healthy), self.mgr.switch_count,
-                      self.mgr.name, self.mgr.reason, self.mgr.pressure_sensor_fault)
+            status = self.status_now()
             events = self.mgr.events[self.logged:]
             self.logged = len(self.mgr.events)
             seq = self.mgr.seq
@@ -239,6 +238,13 @@ class SwitchManagerNode:
             if ev.kind == 'safe':
                 self.publish_diagnostics()
 
+    def status_now(self) -> tuple:
+        """What /eha/redundancy carries (publish_status), compared to tell a change; under
+        self.lock."""
+        m = self.mgr
+        return (m.select.channel, tuple(m.channel_healthy), m.switch_count, m.name, m.reason,
+                m.pressure_sensor_fault)
+
     def publish_status(self, status, seq):
         m = self.Status()
         m.header.stamp = self.get_clock().now().to_msg()
@@ -251,9 +257,7 @@ class SwitchManagerNode:
 
     def on_status_timer(self):
         with self.lock:
-            status = (self.mgr.select.channel, tuple(self.mgr.channel_healthy),
-                      self.mgr.switch_count, self.mgr.name, self.mgr.reason,
-                      self.mgr.pressure_sensor_fault)
+            status = self.status_now()
             seq = self.mgr.seq
         self.publish_status(status, seq)
         t = self.last_state_time

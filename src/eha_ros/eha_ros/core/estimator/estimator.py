@@ -297,13 +297,13 @@ class Estimator:
             return self._result(0.0, 0.0, False, ','.join(reasons), 0)
         if ticks > 1:
             noise_level.gap(self.noise_s)
-            self.detector.s[fd.FS_W1] = math.nan      # no speed one tick before this one
+            self.detector.forget_speed()
         for _ in range(min(max(int(ticks), 1), self.max_gap_ticks) - 1):
             self._predict_tick(*self.kernel, self.omega_prev, math.nan, math.nan)
         fault_before = self.detector.code
         if pos_ok and not (self.isolate and fault_before in (fd.JUMP, fd.STUCK)):
             i = math.nan
-            if motor_current is not None and not why_w and valid:
+            if motor_current is not None and not why_w:         # (pos_ok: valid)
                 i = float(motor_current[int(active_channel)])
             _, y, nis, m, _ = self._estimate(*self.kernel, position, w, i, pressure_a,
                                              pressure_b)

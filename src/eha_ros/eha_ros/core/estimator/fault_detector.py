@@ -40,6 +40,7 @@ import numpy as np
 from numba import njit
 
 from ..plant.chambers import stiffness as chamber_stiffness
+from ..redundancy.health import shaft_pressure
 from . import sensor_band
 
 NONE, JUMP, STUCK, DRIFT = 0, 1, 2, 3
@@ -76,9 +77,9 @@ DRIFT_DEBOUNCE = 5
 (FK_JUMP, FK_JUMP_N, FK_STUCK_N, FK_DRIFT_K, FK_DRIFT_H, FK_DRIFT_N, FK_HOLD, FK_JUMP_STEP,
  FK_JUMP_PVETO,
  FK_PD_PER_M,   # p_D (Pa) per m of piston travel by compressing the oil (0: none)
- # the shaft's torque balance (eq. 3.17) as p_D: k_T / D_p, b_eq / D_p, J_eq / (D_p Ts)
- FK_TB_I, FK_TB_W, FK_TB_DW) = range(13)
-NFK = 13
+ # the shaft's torque balance (eq. 3.17, health.shaft_pressure): k_T, b_eq, J_eq, D_p, Ts
+ FK_TB_KT, FK_TB_B, FK_TB_J, FK_TB_DP, FK_TS) = range(15)
+NFK = 15
 (FS_NJUMP, FS_NSAME, FS_NDRIFT, FS_GPOS, FS_GNEG, FS_ZPREV, FS_HAS_ZPREV, FS_YPREV,
  FS_STEPPED, FS_CODE) = range(10)
 FS_HOLD = 10            # 3 entries: JUMP, STUCK, DRIFT (ticks the verdict stays reported)
@@ -146,7 +147,8 @@ def detect(k, s, z, innovation, S, pz, pa, pb, w, i) -> int:
     r = innovation / math.sqrt(S) if S > 0.0 else 0.0
     # the pump's pressure difference from the shaft's torque balance (NaN without a valid speed
     # now and one sample before, or a current)
-    pv = k[FK_TB_I] * i - k[FK_TB_W] * w - k[FK_TB_DW] * (w - s[FS_W1])
+    pv = shaft_pressure(i, w, (w - s[FS_W1]) / k[FK_TS], k[FK_TB_KT], k[FK_TB_B], k[FK_TB_J],
+                        k[FK_TB_DP])
     s[FS_NJUMP] = s[FS_NJUMP] + 1 if abs(r) > k[FK_JUMP] else 0
     # a jump starts with a one-sample innovation step, and the pressures stay quiet on it and
     # the next sample (a load step's pressure innovation can come a sample late)
@@ -217,11 +219,10 @@ def no_sample(k, s) -> int:
 
 
 def torque_balance(p: dict, Ts: float) -> tuple:
-    """(k_T / D_p, b_eq / D_p, J_eq / (D_p Ts)): the shaft's torque balance (eq. 3.17)
-    k_T i - b_eq w - J_eq dw/dt = D_p p_D solved for p_D, dw/dt over one sample."""
-    D_p = p['plant.pump.D_p']
-    return (p['plant.motor.k_T'] / D_p, p['plant.motor.b_eq'] / D_p,
-            p['plant.motor.J_eq'] / (D_p * Ts))
+    """(k_T, b_eq, J_eq, D_p, Ts): the constants of the shaft's torque balance
+    (health.shaft_pressure), dw/dt over one sample of Ts."""
+    return (p['plant.motor.k_T'], p['plant.motor.b_eq'], p['plant.motor.J_eq'],
+            p['plant.pump.D_p'], Ts)
 
 
 def pd_per_m(p: dict) -> float:
@@ -242,7 +243,7 @@ class FaultDetector:
                  drift_h: float = 150.0, drift_debounce: int = DRIFT_DEBOUNCE,
                  hold_time: float = 0.5,
                  jump_step: float = 0.0, jump_pressure_veto: float = 1e300,
-                 pd_per_m: float = 0.0, torque_balance: tuple = (math.nan,) * 3):
+                 pd_per_m: float = 0.0, torque_balance: tuple = (math.nan,) * 5):
         """torque_balance: :func:`torque_balance` (NaN: no veto by it)."""
         self.Ts = Ts
         self.k = np.zeros(NFK)
@@ -272,6 +273,10 @@ class FaultDetector:
     def start(self, z: float):
         """The first sample: the reference of the stuck test, nothing judged."""
         self.s[FS_ZPREV], self.s[FS_HAS_ZPREV] = z, 1.0
+
+    def forget_speed(self):
+        """States were lost: the next sample's speed has no previous one to differ from."""
+        self.s[FS_W1] = math.nan
 
     def update(self, z: float, innovation: float, S: float, pz: float = 0.0,
                pa: float = math.nan, pb: float = math.nan, w: float = math.nan,

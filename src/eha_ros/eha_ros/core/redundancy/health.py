@@ -83,6 +83,14 @@ def hysteresis(mk, ms, c, j, t, value, judge) -> None:
 
 
 @njit(cache=True)
+def shaft_pressure(i, w, dw_dt, k_T, b_eq, J_eq, D_p) -> float:
+    """The pressure difference the pump's torque implies from the shaft's torque balance
+    (eq. 3.17): p_D = (k_T i - b_eq w - J_eq dw/dt) / D_p (the pressure monitor here, the
+    estimator's fault detector)."""
+    return (k_T * i - b_eq * w - J_eq * dw_dt) / D_p
+
+
+@njit(cache=True)
 def health(k, mk, ms, hs, t, lo_ref, hi_ref, w_meas, i_meas, pa, pb, reported, fault,
            innovation, estimate_ok, loop_ok, cmd, steady, age) -> None:
     """One measured state: every monitor of both couples.
@@ -134,7 +142,7 @@ def health(k, mk, ms, hs, t, lo_ref, hi_ref, w_meas, i_meas, pa, pb, reported, f
         hs[H_WPREV_T + c] = t
         hs[H_WPREV_W + c] = w
         hs[H_WPREV_SET + c] = 1.0
-        r = (k[K_KT] * i - k[K_B] * w - k[K_J] * dw) / k[K_DP] - p_d
+        r = shaft_pressure(i, w, dw, k[K_KT], k[K_B], k[K_J], k[K_DP]) - p_d
         hs[H_F_PRESS + c] = lowpass(k[K_A_PRESS + c], hs[H_F_PRESS + c], r)
         hysteresis(mk, ms, c, M_PRESSURE, t, abs(hs[H_F_PRESS + c]),
                    steady[c] and plausible and loop_ok)
