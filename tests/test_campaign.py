@@ -237,6 +237,42 @@ def test_a_leaky_plant_differs_from_nominal():
     assert b['peak_deviation_m'] > 1.2 * a['peak_deviation_m']
 
 
+def test_the_oracle_is_given_the_plant_parameters_and_learns_none(tmp_path):
+    """campaign --oracle (core.sim.oracle): the estimator's model takes the run's plant (the
+    multipliers as the plant's, the leakage split too), no adaptive state, its other stages
+    kept; the plant, noise and loop are the stack's run. On a tight plant (C_eq x0.1, k_T x1.2)
+    the stack's estimator spends the 1 Hz sine learning its leakage and displacement (RMSE
+    ratio 0.43 over 3-8 s); given them, 0.12."""
+    from eha_ros.core.sim import oracle
+    nom = C.nominal_params()
+    one = {c: 1.0 for c in F.COLUMNS}
+    plant = dict(one, C_eq=0.1, k_T=1.2, leak_split=0.5, friction=1.5, noise=2.0)
+    est = oracle.estimator_params(nom['estimator'], plant)
+    assert est == {**F.plant_params(nom['estimator'], plant), 'estimator.stages': est[
+        'estimator.stages']}
+    assert est['plant.pump.C_r'] == pytest.approx(0.05 * nom['estimator']['plant.pump.C_r'])
+    assert est['plant.friction.F_c'] == pytest.approx(1.5 * nom['plant_sim']['plant.friction.F_c'])
+    assert est['plant.sensors.position_sigma'] == pytest.approx(
+        2.0 * nom['plant_sim']['plant.sensors.position_sigma'])
+    kept = [s for s in nom['estimator']['estimator.stages'] if not s.startswith('adapt_')]
+    assert est['estimator.stages'] == kept and 'load_state' in kept
+    assert len(kept) < len(nom['estimator']['estimator.stages'])
+    scn = SC.from_dict({'name': 's', 'kind': 'sine', 'oracle': True,
+                        'params': {'duration': 8.0, 'window': [3.0, 8.0]},
+                        'specs': {'rmse_ratio': {'max': 0.5}}})
+    assert scn.oracle and SC.from_saved(scn.as_dict()).oracle          # campaign.json, tasks
+    plant = dict(one, C_eq=0.1, k_T=1.2)
+    given, _ = SC.run(scn, nom, plant, 1, trace=False)
+    scn.oracle = False
+    assert 'oracle' not in scn.as_dict()
+    learnt, _ = SC.run(scn, nom, plant, 1, trace=False)
+    assert given['rmse_ratio'] < 0.2 < 0.3 < learnt['rmse_ratio']
+    p = tmp_path / 's.yaml'
+    p.write_text('kind: step\noracle: yes please\n')
+    with pytest.raises(UsageError, match="oracle = 'yes please': expected true or false"):
+        SC.load(str(p))
+
+
 def test_judge_and_excess():
     specs = {'a': {'max': 1.0}, 'b': {'min': 2.0},
              'c': {'max_rel': {'to': 'lin', 'factor': 1.25, 'offset': 0.1}}}
@@ -505,6 +541,30 @@ def test_cli_runs_scenarios_on_seeds_as_a_set(tmp_path):
         assert not (tmp_path / 'bad').exists()
 
 
+def test_cli_oracle_is_kept_in_the_campaign_and_named_in_its_reports(tmp_path):
+    """--oracle: campaign.json keeps it (so --resume does, and refuses to be given it again),
+    report.md and summary.md say the estimator was given the plant parameters."""
+    fam = tmp_path / 'f.csv'
+    write_family_csv(fam, {c: np.array([1.0, 0.1]) if c == 'C_eq' else np.ones(2)
+                           for c in F.NAMES})
+    p = tmp_path / 'short.yaml'
+    p.write_text(yaml.safe_dump({'name': 'short', 'kind': 'step',
+                                 'params': {'duration': 0.8, 'steady': [0.4, 0.7]},
+                                 'specs': {'overshoot_pct': {'max': 5.0}}}))
+    out = tmp_path / 'set'
+    r = cli(str(p), '--family', str(fam), '--seeds', '101', '--oracle', '--out', str(out),
+            '--workers', '1', '--quiet')
+    assert r.returncode == 0, r.stderr
+    d = out / 'short-seed101'
+    assert json.loads((d / 'campaign.json').read_text())['scenario']['oracle'] is True
+    assert "the oracle: given each run's plant parameters" in (d / 'report.md').read_text()
+    md = (out / 'summary.md').read_text()
+    assert '| short (oracle) | 2 |' in md and 'given each run\'s plant parameters' in md, md
+    r = cli('--resume', str(d), '--oracle', timeout=120)
+    assert r.returncode == 2 and 'drop --oracle' in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
 def test_cli_malformed_family_file(tmp_path):
     bad = tmp_path / 'f.csv'
     bad.write_text('C_eq;D_p\n1;1\n')
@@ -514,10 +574,10 @@ def test_cli_malformed_family_file(tmp_path):
     assert not out.exists()
 
 
-def _campaign_folder(path, steady, trace):
+def _campaign_folder(path, steady, trace, passed=(True, True, False)):
     os.makedirs(path)
     pd.DataFrame({'run_id': [2, 0, 1], 'C_eq': [1.0, 0.1, 10.0],
-                  'steady_error_m': steady, 'passed': [True, True, False],
+                  'steady_error_m': steady, 'passed': list(passed),
                   'wall_s': np.random.rand(3)}).to_parquet(os.path.join(path, 'results.parquet'))
     np.savez(os.path.join(path, 'traces.npz'), x=np.array(trace), t=np.arange(3.0))
     return str(path)
@@ -525,11 +585,13 @@ def _campaign_folder(path, steady, trace):
 
 def test_compare_two_campaigns_run_by_run(tmp_path):
     """scripts/campaign --compare: identical folders (row order and wall time aside) exit 0;
-    a moved figure is named with its runs and largest difference, exit 1; not a campaign
-    folder: one line, exit 2."""
+    a moved figure is named with its runs and largest difference, and the runs that pass on
+    one side only by their ids (the stack beside its oracle), exit 1; not a campaign folder:
+    one line, exit 2."""
     a = _campaign_folder(tmp_path / 'a', [1e-6, float('nan'), 3e-6], [0.0, 1.0, 2.0])
     b = _campaign_folder(tmp_path / 'b', [1e-6, float('nan'), 3e-6], [0.0, 1.0, 2.0])
-    c = _campaign_folder(tmp_path / 'c', [1e-6, float('nan'), 5e-6], [0.0, 1.0, 2.5])
+    c = _campaign_folder(tmp_path / 'c', [1e-6, float('nan'), 5e-6], [0.0, 1.0, 2.5],
+                         passed=(True, False, True))      # run 0 fails, run 1 passes
     cli = [sys.executable, '-m', 'eha_ros.tools.campaign', '--compare']
     same = subprocess.run(cli + [a, b], capture_output=True, text=True, timeout=120)
     assert same.returncode == 0, same.stderr
@@ -538,6 +600,9 @@ def test_compare_two_campaigns_run_by_run(tmp_path):
     assert moved.returncode == 1, moved.stderr
     assert 'steady_error_m: 1 of 3 runs differ, largest |a - b| 2e-06' in moved.stdout, moved.stdout
     assert 'traces: x' in moved.stdout
+    assert 'pass count: 2 in the first, 2 in the second; 0 fail in both' in moved.stdout
+    assert '1 pass in the first only: [0]' in moved.stdout
+    assert '1 pass in the second only: [1]' in moved.stdout, moved.stdout
     bad = subprocess.run(cli + [a, str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and 'no results.parquet' in bad.stderr and \
         len(bad.stderr.strip().splitlines()) == 1, bad.stderr

@@ -14,6 +14,10 @@ families:  thesis    the 270 plants of Table 4.5 (the QFT design grid)
            FILE      CSV or Parquet with columns C_eq, D_p, beta, k_T, k_E
                      [, friction, noise, leak_split] (multipliers of config/plant.yaml)
 Only the plant varies; estimator, controller and switch manager keep config/'s nominal values.
+--oracle gives the estimator each run's plant parameters instead (no adaptive states;
+core.sim.oracle). Beside the stack's campaign with the same --seed (the same noise run by run):
+a run only the stack fails was lost to learning the parameters; one both fail was not
+(--compare STACK ORACLE lists the runs that pass on one side only).
 --plant-params FILE centres the family on another plant: the plant.* keys of FILE (an
 identified plant, scripts/identify's identified.yaml) replace config/'s before the multipliers
 apply; the estimator and controller still keep config/'s values.
@@ -61,6 +65,10 @@ def main(argv=None) -> int:
     ap.add_argument('--plant-params', default=None, metavar='FILE',
                     help='the family\'s centre: plant.* keys of FILE over config/plant.yaml '
                          '(an identified plant); kept by --resume')
+    ap.add_argument('--oracle', action='store_true',
+                    help='the runs\' estimator is given each run\'s plant parameters instead '
+                         'of learning them (no adaptive states; the same noise); kept by '
+                         '--resume')
     ap.add_argument('--resume', default=None, metavar='DIR',
                     help='finish the interrupted campaign in DIR')
     ap.add_argument('--no-report', action='store_true', help='skip report.md and its plots')
@@ -100,7 +108,7 @@ def main(argv=None) -> int:
                            args.out, args.resume, progress=not args.quiet,
                            report=not args.no_report,
                            log=lambda s: print(s, file=sys.stderr, flush=True),
-                           plant_params=args.plant_params)
+                           plant_params=args.plant_params, oracle=args.oracle)
         i = res.info
         print(f'campaign {i["scenario"]["name"]}: {i["rows"]} runs, {i["passed"]} passed, '
               f'{i["failed"]} failed ({i["errors"]} errors); wall {i["wall_s"]:.1f} s, first '
@@ -138,7 +146,7 @@ def run_set(args) -> int:
     try:
         summary = CS.run_set(args.scenario, args.family, seeds, out, client, log=log,
                              progress=not args.quiet, report=not args.no_report,
-                             plant_params=args.plant_params)
+                             plant_params=args.plant_params, oracle=args.oracle)
     finally:
         C.disconnect(client, cluster)
     roles = ', '.join(sorted(set(summary['roles'].values())))

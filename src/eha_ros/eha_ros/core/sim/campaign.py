@@ -358,7 +358,8 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
                  out: str | None = None, resume: str | None = None, client=None,
                  config_dir: str | None = None, progress: bool = True, report: bool = True,
                  chunk_size: int | None = None, trace: bool = True,
-                 log=print, plant_params: str | None = None) -> CampaignResult:
+                 log=print, plant_params: str | None = None,
+                 oracle: bool = False) -> CampaignResult:
     """Run ``scenario`` (name in config/campaigns/ or a YAML path) on ``family`` ('thesis',
     'random:N' or a CSV/Parquet of multipliers) with campaign seed ``seed``: each run draws
     its own noise from (seed, run id) (:func:`noise_seed`); random:N is drawn with it.
@@ -368,8 +369,10 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
     distributed.Client. ``resume=DIR`` finishes an interrupted campaign in DIR (scenario,
     family and seed are read from it). ``plant_params``: a params file whose plant.* keys (an
     identified plant, core.hardware.sim_params.plant_file) are the family's centre, the plant the
-    multipliers scale; kept in the scenario's overrides, so a resume keeps it. Every user
-    mistake is a UsageError with one line, raised before anything is written."""
+    multipliers scale; kept in the scenario's overrides, so a resume keeps it. ``oracle``: the
+    runs' estimator is given the plant parameters (core.sim.oracle; kept in the scenario, as
+    is a scenario's own ``oracle: true``). Every user mistake is a UsageError with one line,
+    raised before anything is written."""
     import pandas as pd
     t_start = time.monotonic()
     if int(seed) < 0:
@@ -377,6 +380,9 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
     if resume and plant_params:
         raise UsageError(f'--resume {resume}: the campaign keeps the plant it started with: '
                          f'drop --plant-params')
+    if resume and oracle:
+        raise UsageError(f'--resume {resume}: the campaign keeps the estimator it started '
+                         f'with: drop --oracle')
     if resume:
         info0, fam, scn, seed = _resume_inputs(resume, scenario)
         out, family = resume, info0['family']
@@ -387,6 +393,7 @@ def run_campaign(scenario: str | None = None, family: str | dict = 'thesis', see
         scn = SC.load(scenario)
         if plant_params:
             scn.overrides = {**centre(plant_params, config_dir), **scn.overrides}
+        scn.oracle = scn.oracle or oracle
         if isinstance(family, dict):           # API: {column: array} of multipliers
             fam = {c: np.asarray(family.get(c, np.ones(len(family['C_eq']))), float)
                    for c in MULT}

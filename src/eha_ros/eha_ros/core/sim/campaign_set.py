@@ -46,12 +46,12 @@ def parse_seeds(text: str) -> list[int]:
 
 def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=print,
             progress: bool = True, report: bool = True, config_dir: str | None = None,
-            plant_params: str | None = None) -> dict:
+            plant_params: str | None = None, oracle: bool = False) -> dict:
     """Each scenario on each seed into DIR/<scenario>-seed<S>/ with the given Dask client;
     a folder that already holds a finished campaign is kept (reruns finish an interrupted
     set), an unfinished one is resumed (with the plant it started with; ``plant_params``: the
-    family's centre of the new ones, run_campaign). Returns the summary (also
-    DIR/summary.json, .md)."""
+    family's centre of the new ones, run_campaign; ``oracle``: their estimator is given the
+    plant parameters). Returns the summary (also DIR/summary.json, .md)."""
     from . import scenarios as SC
     names = [SC.load(s).name for s in scenarios]         # unknown scenarios fail first
     if len(set(names)) != len(names):
@@ -71,7 +71,8 @@ def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=pri
             run_campaign(None if resume else scn, family, seed, out=None if resume else d,
                          resume=resume, client=client, progress=progress, report=report,
                          config_dir=config_dir, log=log,
-                         plant_params=None if resume else plant_params)
+                         plant_params=None if resume else plant_params,
+                         oracle=oracle and not resume)
     summary = summarize(folders, family)
     summary['wall_s'] = round(time.monotonic() - t0, 1)
     write_json(os.path.join(out, 'summary.json'), summary, True)
@@ -98,10 +99,11 @@ def summarize(folders: dict, family: str) -> dict:
     out = {'family': family, 'seeds': seeds,
            'roles': {str(s): seed_role(s) for s in seeds}, 'scenarios': {}}
     for name in dict.fromkeys(n for n, _ in folders):
-        per_seed, failures, specs_worst = {}, [], {}
+        per_seed, failures, specs_worst, oracle = {}, [], {}, False
         for seed in seeds:
             d = folders[(name, seed)]
             info = _info(d) or {}
+            oracle = oracle or bool((info.get('scenario') or {}).get('oracle'))
             df = pd.read_parquet(os.path.join(d, 'results.parquet'))
             specs = (info.get('scenario') or {}).get('specs') or {}
             per_seed[str(seed)] = dict(runs=int(len(df)), passed=int(df['passed'].sum()),
@@ -128,7 +130,7 @@ def summarize(folders: dict, family: str) -> dict:
             per_seed=per_seed, worst_seed=int(worst),
             worst_passed=per_seed[worst]['passed'], runs=runs[0] if runs else 0,
             all_passed=all(p == r for p, r in zip(passed, runs)),
-            specs=specs_worst, failures=failures)
+            specs=specs_worst, failures=failures, oracle=oracle)
     return out
 
 
@@ -153,14 +155,18 @@ def markdown(summary: dict) -> list[str]:
     roles = sorted(set(summary['roles'].values()))
     md = [f'# Campaign set: {summary["family"]}, seeds {", ".join(map(str, seeds))}', '',
           f'Seed roles: {", ".join(roles)} (held-out seeds {RECORD_SEEDS[0]}-{RECORD_SEEDS[-1]} '
-          f'give the figures of record; tuning seeds {TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]}).', '',
-          '| scenario | runs | ' + ' | '.join(f'seed {s}' for s in seeds) +
-          ' | worst seed | worst figures |',
-          '|' + '---|' * (len(seeds) + 4)]
+          f'give the figures of record; tuning seeds {TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]}).', '']
+    if any(s.get('oracle') for s in summary['scenarios'].values()):
+        md += ['(oracle): the estimator was given each run\'s plant parameters (campaign '
+               '--oracle, core.sim.oracle).', '']
+    md += ['| scenario | runs | ' + ' | '.join(f'seed {s}' for s in seeds) +
+           ' | worst seed | worst figures |',
+           '|' + '---|' * (len(seeds) + 4)]
     for name, s in summary['scenarios'].items():
         figs = '; '.join(f'{m} {fmt(m, w["worst"]) if w["worst"] is not None else "-"} '
                          f'({w["requirement"]})' for m, w in s['specs'].items())
-        md.append(f'| {name} | {s["runs"]} | ' +
+        label = f'{name} (oracle)' if s.get('oracle') else name
+        md.append(f'| {label} | {s["runs"]} | ' +
                   ' | '.join(str(s['per_seed'][str(x)]['passed']) for x in seeds) +
                   f' | {s["worst_seed"]} ({s["worst_passed"]}) | {figs} |')
     md.append('')

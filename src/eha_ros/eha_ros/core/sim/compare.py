@@ -2,7 +2,9 @@
 
 Rows are matched by run_id; every column of results.parquet present in both is compared
 exactly (NaN equals NaN), the wall-time bookkeeping aside, and every array of traces.npz. A
-refactoring must give "identical"; a tuning change lists what moved.
+refactoring must give "identical"; a tuning change lists what moved, and which runs pass on one
+side only (the stack beside its oracle, core.sim.oracle: the runs lost to learning the
+plant's parameters).
 """
 from __future__ import annotations
 
@@ -24,6 +26,9 @@ class Comparison:
     differing: dict = field(default_factory=dict)   # column -> (runs differing, max |a - b|)
     traces: int = 0                        # trace arrays compared
     traces_differing: list = field(default_factory=list)
+    passed: tuple = ()                     # runs passed in a, in b (both have `passed`)
+    pass_only_a: list = field(default_factory=list)     # run_ids passing in a, failing in b
+    pass_only_b: list = field(default_factory=list)
 
     @property
     def identical(self) -> bool:
@@ -53,6 +58,11 @@ def compare(folder_a: str, folder_b: str) -> Comparison:
     out = Comparison(len(common), sorted(set(a.index) - set(b.index)),
                      sorted(set(b.index) - set(a.index)))
     a, b = a.loc[common], b.loc[common]
+    if 'passed' in a.columns and 'passed' in b.columns:
+        pa, pb = a['passed'].astype(bool), b['passed'].astype(bool)
+        out.passed = (int(pa.sum()), int(pb.sum()))
+        out.pass_only_a = [int(i) for i in common[(pa & ~pb).to_numpy()]]
+        out.pass_only_b = [int(i) for i in common[(pb & ~pa).to_numpy()]]
     for col in a.columns:
         if col in TIMING or col not in b.columns:
             continue
@@ -83,6 +93,13 @@ def summary(c: Comparison) -> list[str]:
     lines = [head]
     lines += [f'  {col}: {n} of {c.runs} runs differ, largest |a - b| {gap:.6g}'
               for col, (n, gap) in sorted(c.differing.items())]
+    if c.passed and not c.identical:
+        lines.append(f'  pass count: {c.passed[0]} in the first, {c.passed[1]} in the second; '
+                     f'{c.runs - c.passed[0] - len(c.pass_only_b)} fail in both')
+        for side, ids in (('the first', c.pass_only_a), ('the second', c.pass_only_b)):
+            if ids:
+                lines.append(f'  {len(ids)} pass in {side} only: {ids[:10]}' +
+                             (' ...' if len(ids) > 10 else ''))
     if c.traces_differing:
         lines.append('  traces: ' + ', '.join(c.traces_differing))
     for side, ids in (('only in the first', c.only_a), ('only in the second', c.only_b)):

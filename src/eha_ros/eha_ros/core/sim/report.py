@@ -596,6 +596,9 @@ def write_report(out_dir: str, info: dict, results, traces: dict | None) -> str:
             ('scheduler', info.get('scheduler', '')),
             ('campaign seed', f'{info.get("seed", "")} ({info.get("seed_role", "?")}; each run '
                               'draws its own noise from the seed and its run id)')]
+    if scn.get('oracle'):
+        rows.append(('estimator', "the oracle: given each run's plant parameters, no adaptive "
+                                  "states (campaign --oracle, core.sim.oracle)"))
     md += _table(['item', 'value'], rows) + ['']
 
     # specs

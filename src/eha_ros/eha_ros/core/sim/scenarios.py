@@ -14,11 +14,14 @@ A scenario is a YAML file (config/campaigns/<name>.yaml; users add their own)::
         - {min: 49.0}
     overrides:                          # optional: node parameters changed for every run, as
       controller:control.rate_limit: 5.0  # -p node:key:=value (e.g. reference limits lifted)
+    oracle: false                       # optional: the estimator is given the plant's
+                                        # parameters (core.sim.oracle, campaign --oracle)
 
 One run (:func:`run`) = the batch closed loop (core.sim.batch.BatchLoop, compiled path) of the
 stack -- nonlinear plant, Kalman estimator, QFT controller, switch manager, in the stack's tick
 order -- on ONE plant variant (core.sim.family.plant_params) with one noise seed; estimator,
-controller and switch manager keep the nominal parameters they are given.
+controller and switch manager keep the nominal parameters they are given (with ``oracle``
+the estimator's model takes the variant's parameters instead).
 """
 from __future__ import annotations
 
@@ -83,6 +86,7 @@ class Scenario:
     specs: dict = field(default_factory=dict)
     path: str = ''
     overrides: dict = field(default_factory=dict)    # {'node:key': value} of the loop's nodes
+    oracle: bool = False         # the estimator is given the plant parameters (core.sim.oracle)
 
     @property
     def duration(self) -> float:
@@ -92,9 +96,12 @@ class Scenario:
         return float(p['duration'])
 
     def as_dict(self) -> dict:
-        return dict(name=self.name, kind=self.kind, description=self.description,
-                    params=self.params, specs=self.specs, overrides=self.overrides,
-                    duration=self.duration)
+        doc = dict(name=self.name, kind=self.kind, description=self.description,
+                   params=self.params, specs=self.specs, overrides=self.overrides,
+                   duration=self.duration)
+        if self.oracle:
+            doc['oracle'] = True
+        return doc
 
 
 def scenario_dir() -> str:
@@ -132,10 +139,14 @@ def load(name_or_path: str) -> Scenario:
 def from_dict(doc, path: str = '<dict>') -> Scenario:
     if not isinstance(doc, dict):
         raise UsageError(f'scenario {path}: expected a mapping with name, kind, params, specs')
-    unknown = set(doc) - {'name', 'kind', 'description', 'params', 'specs', 'overrides'}
+    unknown = set(doc) - {'name', 'kind', 'description', 'params', 'specs', 'overrides',
+                          'oracle'}
     if unknown:
         raise UsageError(f'scenario {path}: unknown key(s) {", ".join(sorted(unknown))} '
-                         f'(expected name, kind, description, params, specs, overrides)')
+                         f'(expected name, kind, description, params, specs, overrides, '
+                         f'oracle)')
+    if not isinstance(doc.get('oracle', False), bool):
+        raise UsageError(f'scenario {path}: oracle = {doc["oracle"]!r}: expected true or false')
     kind = doc.get('kind')
     if kind not in KINDS:
         raise UsageError(f'scenario {path}: kind {kind!r}: expected one of {", ".join(KINDS)}')
@@ -170,7 +181,8 @@ def from_dict(doc, path: str = '<dict>') -> Scenario:
         raise UsageError(f'scenario {path}: overrides = {overrides!r}: expected a mapping '
                          f'node:key: value with node one of {", ".join(NODES)}')
     scn = Scenario(str(doc.get('name') or os.path.basename(path)[:-5]), kind,
-                   str(doc.get('description', '')), params, specs, path, dict(overrides))
+                   str(doc.get('description', '')), params, specs, path, dict(overrides),
+                   bool(doc.get('oracle', False)))
     _check_signals(scn, path)
     return scn
 
@@ -280,11 +292,15 @@ def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool 
     from .batch import build_loop
     from .switchover import schedule
     from .family import plant_params
+    from .oracle import estimator_params
     plant = plant_params(nominal['plant_sim'], multipliers)
+    est = (estimator_params(nominal['estimator'], multipliers) if scn.oracle
+           else nominal['estimator'])
     Ts = plant['plant.sim.Ts']
     ref, load, faults, commands = signals(scn, Ts)
     n = len(ref)
-    loop = build_loop({**nominal, 'plant_sim': plant}, seed, schedule(faults, n, Ts),
+    loop = build_loop({**nominal, 'plant_sim': plant, 'estimator': est}, seed,
+                      schedule(faults, n, Ts),
                       schedule(commands, n, Ts))
     rec = loop.run(ref, load).T
     t = np.arange(n) * Ts
