@@ -563,6 +563,11 @@ def test_cli_oracle_is_kept_in_the_campaign_and_named_in_its_reports(tmp_path):
     r = cli('--resume', str(d), '--oracle', timeout=120)
     assert r.returncode == 2 and 'drop --oracle' in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+    # the same --out without --oracle would keep the oracle's folders as the stack's
+    r = cli(str(p), '--family', str(fam), '--seeds', '101', '--out', str(out), '--workers', '1',
+            '--quiet', timeout=120)
+    assert r.returncode == 2 and 'holds a campaign with --oracle' in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
 
 
 def test_cli_malformed_family_file(tmp_path):

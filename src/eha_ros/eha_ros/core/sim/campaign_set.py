@@ -53,9 +53,18 @@ def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=pri
     family's centre of the new ones, run_campaign; ``oracle``: their estimator is given the
     plant parameters). Returns the summary (also DIR/summary.json, .md)."""
     from . import scenarios as SC
-    names = [SC.load(s).name for s in scenarios]         # unknown scenarios fail first
+    loaded = [SC.load(s) for s in scenarios]             # unknown scenarios fail first
+    names = [s.name for s in loaded]
     if len(set(names)) != len(names):
         raise UsageError(f'scenarios {", ".join(scenarios)}: a scenario given twice')
+    for scn in loaded:                                  # a kept folder is of the same estimator
+        want = scn.oracle or oracle
+        for seed in seeds:
+            d = os.path.join(out, f'{scn.name}-seed{seed}')
+            info = _info(d)
+            if info is not None and bool((info.get('scenario') or {}).get('oracle')) != want:
+                raise UsageError(f'{d} holds a campaign {"without" if want else "with"} '
+                                 f'--oracle: give another --out')
     os.makedirs(out, exist_ok=True)
     t0 = time.monotonic()
     folders = {}
