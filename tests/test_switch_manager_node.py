@@ -356,3 +356,44 @@ def test_switch_plots(run):
         f'DDS: {e["kind"]} {e["from_state"]} -> {e["to_state"]}' for e in starts])
     assert len(paths) == 3
     print('plots: ' + ', '.join(os.path.relpath(p, ROOT) for p in paths))
+
+
+def test_lock_step_state_handled_before_its_command_is_not_judged(rclpy_session):
+    """Lock-step: the plant steps to state k on command k - 1. A starved manager that takes
+    its queued states before the commands must not judge them against the older references
+    (CI: a 3 Hz sine of the identification tripped both couples, 181 and 258 rad/s against
+    150); once the commands are in, the same speed error trips couple A."""
+    from eha_msgs.msg import ActuatorCommand, ActuatorState
+    from eha_ros.core.redundancy.params import SCHEMA
+    from eha_ros.core.sim.batch import node_params
+    from eha_ros.nodes import switch_manager
+
+    def state(seq, w):
+        node.handle_state(ActuatorState(
+            seq=seq, motor_speed=[w, 0.0], motor_current=[0.0, 0.0], pressure_a=1.2e6,
+            pressure_b=1.0e6, active_channel=0, valid=True, drive_enabled=[True, False],
+            drive_fault=[False, False]))
+
+    def command(seq, w):
+        node.on_command(ActuatorCommand(seq=seq, motor_speed_ref=w))
+
+    for lockstep, trips_while_behind in ((True, False), (False, True)):
+        node = switch_manager.make_node(node_params('switch_manager', SCHEMA))
+        try:
+            node.lockstep = lockstep
+            for k in range(1, 2600):            # the loop closed at rest: armed after 2 s
+                command(k - 1, 0.0)
+                state(k, 0.0)
+            assert node.armed and node.mgr.name == 'ACTIVE_A'
+            for k in range(2600, 2700):         # 400 rad/s off, the commands not yet in
+                state(k, 400.0)
+            assert (node.mgr.name != 'ACTIVE_A') == trips_while_behind, node.mgr.name
+            if lockstep:
+                assert node.c['states_before_their_command'] == 49   # then no fresh command
+                for k in range(2600, 2800):
+                    command(k - 1, 0.0)
+                    if k >= 2700:
+                        state(k, 400.0)
+                assert node.mgr.name == 'DEGRADED'      # judged: A tripped, B took over
+        finally:
+            node.destroy_node()
