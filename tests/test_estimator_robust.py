@@ -587,7 +587,7 @@ GRID = dict(friction=1.0, noise=1.0, leak_split=1.0)     # Table 4.5: the datash
 
 
 @pytest.mark.parametrize('row, needed', [     # Table 4.5 plants 211 and 216 (the grid's values)
-    (dict(GRID, C_eq=10 ** 0.5, D_p=1.0, beta=1.4, k_T=0.96 ** 0.5, k_E=0.96 ** 0.5), False),
+    (dict(GRID, C_eq=10 ** 0.5, D_p=1.0, beta=1.4, k_T=0.96 ** 0.5, k_E=0.96 ** 0.5), True),
     (dict(GRID, C_eq=10.0, D_p=0.8, beta=0.7, k_T=0.8, k_E=0.8), True)])   # the softest corner
 def test_position_noise_under_a_varying_load_keeps_the_stiffness(row, needed):
     """Campaign scenario stiffness (5 kN at 1, 4, 7 Hz) against the decided bound of issue 42
@@ -599,7 +599,11 @@ def test_position_noise_under_a_varying_load_keeps_the_stiffness(row, needed):
     frequency: the softest corner, whose loop on the true position reaches only 1.15 / 1.11 /
     1.07 of its limit, 1.04 / 1.02 / 1.03. Plant 211 (beta x1.4) missed without it too (0.55 at
     7 Hz) until the chamber filter's check valves stopped passing reverse flow
-    (stepper.valve_state): now 2.1 / 2.9 / 1.7 without, 3.1 / 2.8 / 2.7 with."""
+    (stepper.valve_state): then 2.1 / 2.9 / 1.7 without, 3.1 / 2.8 / 2.7 with. With the
+    leakage compensation (control.leakage_compensation 0.5, the default since 2026-11-29) the
+    pump also supplies the leak flow the filter estimates, and plant 211 needs it again: 1.85
+    / 2.08 / 0.40 without, 4.67 / 4.03 / 3.83 with; the softest corner 0.84 / 1.21 / 2.20
+    without, 1.46 / 1.36 / 1.31 with."""
     from eha_ros.core.sim import campaign, scenarios
     nominal = campaign.nominal_params()
     scn = scenarios.load('stiffness')

@@ -86,6 +86,24 @@ def test_each_condition_trips_and_names_the_node(fault, kind, node, ticks):
     assert ticks - 5 <= k - 2000 <= ticks + 25
 
 
+def test_a_trip_is_dated_by_the_tick_it_tripped_on():
+    """A starved node takes its queues in any order: here the states lag 866 ticks behind the
+    estimates (seen on a loaded machine in test_node_trips_to_the_safe_state). The rejected
+    trip carries the seq of the estimate that tripped it, the limit cycle that of the command,
+    not the newest state's."""
+    sup = LoopSupervisor(params())
+    for k in range(3000):
+        t = k * TS
+        sup.state(max(k - 866, 0), t)
+        sup.estimate(k, k >= 2000, False, t)
+        sup.command(k, 0.0, t)
+        if sup.trip:
+            break
+    assert sup.trip.kind == REJECTED and sup.trip.seq == k == 2000 + sup.reject_n - 1
+    trip, k = feed('cycle')
+    assert trip.kind == LIMIT_CYCLE and trip.seq == k - 1     # feed sees it a tick later
+
+
 def test_lockstep_stall_waits_longer_and_no_answer_check():
     trip, k = feed('controller', realtime=False, n=9000, lockstep_stall_timeout=5.0)
     assert trip.kind == STALLED and 5000 <= k - 2000 <= 5025

@@ -39,13 +39,15 @@ NODE = Schema('controller', TF + [
               'core.controller.antiwindup.drive_reach): a held '
               'piston or a motor starting from rest does not wind G up; false: the speed clamp '
               'only'),
-    Param('control.leakage_compensation', 'float', '', 0.0, 0.0, 2.0,
+    Param('control.leakage_compensation', 'float', '', 0.5, 0.0, 2.0,
           doc='leakage compensation: the speed command adds alpha q_L / D_p, the pump speed '
               'that supplies the fraction alpha of the flow the loaded chamber leaks, q_L of '
               '/eha/estimate leak_flow (core.estimator.adapt.leak_flow: the chamber filter\'s '
               'pressures and adapted leakage), so the pump feeds the leak before the position '
-              'error shows it: dynamic stiffness under load (issue 42). 0: off; NaN leak flow '
-              '(a filter without chamber pressures): nothing added'),
+              'error shows it: dynamic stiffness under load (issue 42; 0.5: the decided '
+              'stiffness limits on every held-out run of Table 4.5, docs/measurements.md). 0: '
+              'off, the thesis\' controller; NaN leak flow (a filter without chamber '
+              'pressures): nothing added'),
     Param('control.prewarp_hz', 'float', 'Hz', 0.0, 0.0, 200.0,
           doc='Tustin prewarp frequency; 0 = plain Tustin'),
     Param('control.watchdog_ticks', 'int', '', 5, 1, 1000,

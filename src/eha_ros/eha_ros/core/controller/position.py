@@ -8,7 +8,8 @@ One call per estimate::
     e = r_f - x_hat -> G (state x, observer-form anti-windup) -> u -> u_s = clip(u, +-omega_max)
     motor speed omega_m -> the drive's reach (antiwindup.drive_reach) bounds the anti-windup's
     actuator u_a = clip(u_s, omega_m -+ reach)
-    estimated leak flow q_L -> optional leakage compensation: u += alpha q_L / D_p before the clamp
+    estimated leak flow q_L -> leakage compensation (alpha 0.5 by default): u += alpha q_L / D_p
+    before the clamp
 
 G is realised as one state space (a cascade of real first- and second-order sections,
 controller.lti) of any proper G(s); nothing assumes its structure. The per-tick arithmetic is

@@ -59,7 +59,9 @@ class Trip:
     kind: str           # STALLED, UNANSWERED, REJECTED or LIMIT_CYCLE
     message: str        # one line: what, which node, how long
     t: float            # wall time of the trip [s] (the caller's clock)
-    seq: int            # newest state seq seen then
+    seq: int            # the tick it tripped on: the estimate's or command's seq, the newest
+                        # state seq for the wall-clock checks (a starved node's queues lag
+                        # apart: a state seq would date an estimate's trip too early)
 
 
 class LoopSupervisor:
@@ -116,7 +118,7 @@ class LoopSupervisor:
         if self.rejected_run >= self.reject_n:
             self._trip(REJECTED, f'the estimator has rejected every position measurement for '
                                  f'{self.rejected_run * self.p.Ts * 1e3:.0f} ms (out of '
-                                 f'range or non-finite), no sensor-fault verdict', now)
+                                 f'range or non-finite), no sensor-fault verdict', now, seq)
 
     def command(self, seq: int, speed: float, now: float):
         self._progress('command', seq, now)
@@ -138,7 +140,7 @@ class LoopSupervisor:
                 self._trip(LIMIT_CYCLE, f'saturation limit cycle: speed command at the '
                                         f'{self.p.omega_max:.0f} rad/s limit on {100 * share:.0f} '
                                         f'% of the last {self.p.window:g} s with '
-                                        f'{len(self.reversals)} reversals', now)
+                                        f'{len(self.reversals)} reversals', now, seq)
 
     def check(self, now: float):
         """Wall-clock check of the stall conditions (call it every few tens of ms)."""
@@ -211,9 +213,9 @@ class LoopSupervisor:
                                    f'{self.p.window:g} s unanswered (command(k) after '
                                    f'state(k+1))', now)
 
-    def _trip(self, kind: str, message: str, now: float):
+    def _trip(self, kind: str, message: str, now: float, seq: int | None = None):
         if self.trip is None:
-            self.trip = Trip(kind, message, now, self.seq['state'])
+            self.trip = Trip(kind, message, now, self.seq['state'] if seq is None else seq)
 
     def values(self) -> dict:
         """For /diagnostics."""
