@@ -299,6 +299,36 @@ def test_bad_pressure_falls_back_to_position_update(params):
     assert est.counters['rejected_pressure'] == 2
 
 
+def test_blamed_pressure_sensors_leave_the_filter(params):
+    """Estimator.stop_pressures (the switch manager blamed the chamber pressure sensors): the
+    update takes the position alone and the estimate no longer depends on the pressure
+    readings: p_A 100 bar high or NaN gives the same estimate bit for bit, nothing rejected.
+    Not stopped, the same 100 bar moves the estimate."""
+    pp = PlantParams.from_dict(params)
+    rng = np.random.default_rng(3)
+    t = np.arange(600) * pp.Ts
+    x = 2e-3 * np.sin(2 * np.pi * 2.0 * t)
+    w = 2e-3 * 2 * np.pi * 2.0 * np.cos(2 * np.pi * 2.0 * t) * pp.A_p / pp.D_p
+    pa = 2e6 + 1e6 * np.sin(2 * np.pi * 2.0 * t) + 1e4 * rng.normal(size=t.size)
+    pb = 2e6 - 1e6 * np.sin(2 * np.pi * 2.0 * t) + 1e4 * rng.normal(size=t.size)
+    x_meas = x + 10e-6 * rng.normal(size=t.size)
+    est = {k: Estimator(params) for k in ('high', 'nan', 'kept')}
+    out = {k: [] for k in est}
+    for i in range(t.size):
+        if i == 200:
+            assert est['high'].stop_pressures() and est['nan'].stop_pressures()
+            assert not est['high'].stop_pressures()            # already off
+        for k, e in est.items():
+            a = pa[i] if i < 200 else (float('nan') if k == 'nan' else pa[i] + 1e7)
+            r = e.update(x_meas[i], np.array([w[i], 0.0]), a, pb[i], 0)
+            assert i == 0 or r.nis_dim == (1 if i >= 200 and k != 'kept' else 3), (k, i)
+            out[k].append(r.position)
+    assert out['high'] == out['nan']
+    assert est['nan'].counters.get('rejected_pressure', 0) == 0
+    diff = np.abs(np.subtract(out['kept'], out['high']))[200:]
+    assert diff.max() > 1e-6, diff.max()
+
+
 def test_bad_motor_speed_or_channel_holds_last_good_speed(params):
     est = Estimator(params)
     est.update(0.0, [100.0, 0.0], 1e6, 1e6, 0)

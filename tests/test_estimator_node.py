@@ -76,46 +76,63 @@ def test_bad_params_file_one_line_exit_2(tmp_path):
     assert 'Traceback' not in res.stderr
 
 
+class Stream:
+    """Crafted states to ``probe``'s estimator at about 1 kHz from a thread: seq counts up,
+    a noisy position about 1 mm (a noise-free constant would rightly be reported stuck),
+    motors at rest, both pressures 10 bar; ``fill(m)`` changes the message before it goes."""
+
+    def __init__(self, probe, node, fill=None):
+        self.probe, self.node, self.fill = probe, node, fill
+        self.seq = 1
+        self.rng = np.random.default_rng(0)
+        self.stop = threading.Event()
+        self.th = threading.Thread(target=self.run, daemon=True)
+        self.th.start()
+
+    def run(self):
+        while not self.stop.is_set():
+            m = self.probe.State()
+            m.header.stamp = self.node.get_clock().now().to_msg()
+            m.seq = self.seq
+            m.position = 1e-3 + 1e-5 * self.rng.normal()
+            m.motor_speed = [0.0, 0.0]
+            m.pressure_a = m.pressure_b = 1.0e6
+            m.active_channel = 0
+            m.valid = True
+            if self.fill is not None:
+                self.fill(m)
+            self.probe.state_pub.publish(m)
+            self.seq += 1
+            time.sleep(0.001)
+
+    def close(self):
+        self.stop.set()
+        self.th.join()
+
+
 def test_nan_measurement_predict_only_counted_and_reported(ros_node):
     """A crafted state stream to an estimator alone on /est_test; a few NaN positions."""
     proc = start_process(cmd('estimator', EST, '-r', '__ns:=/est_test', '-p',
                              'estimator:estimator.node.diagnostics_period:=0.2'))
+    stream = None
     try:
         probe = Probe(ros_node, '/est_test')
         nan_seqs = set()
-        stop = threading.Event()
-        th = None
-        seq_now = [1]
-        rng = np.random.default_rng(0)
 
-        def publish():
-            while not stop.is_set():
-                seq = seq_now[0]
-                m = probe.State()
-                m.header.stamp = ros_node.get_clock().now().to_msg()
-                m.seq = seq
-                # a noisy sensor (a noise-free constant would rightly be reported stuck)
-                m.position = float('nan') if seq in nan_seqs else 1e-3 + 1e-5 * rng.normal()
-                m.motor_speed = [0.0, 0.0]
-                m.pressure_a = m.pressure_b = 1.0e6
-                m.active_channel = 0
-                m.valid = True
-                probe.state_pub.publish(m)
-                seq_now[0] = seq + 1
-                time.sleep(0.001)
+        def fill(m):
+            if m.seq in nan_seqs:
+                m.position = float('nan')
 
-        th = threading.Thread(target=publish, daemon=True)
-        th.start()
+        stream = Stream(probe, ros_node, fill)
         # stream good states until the estimator answers (discovery), then inject NaN
         assert wait_for(lambda: len(probe.estimates) > 200, 60), \
             'no estimates from the estimator on /est_test'
-        first = seq_now[0] + 100
+        first = stream.seq + 100
         nan_seqs.update(range(first, first + 5))
         nan_seqs.add(first + 50)
         assert wait_for(lambda: any(e.seq > first + 300 for _, e in list(probe.estimates)), 30)
-        stop.set()
-        th.join()
-        th = None
+        stream.close()
+        stream = None
         by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
         answered = [s for s in nan_seqs if s in by_seq]
         # on a heavily loaded machine the estimator may miss a state (then counted as lost)
@@ -136,12 +153,59 @@ def test_nan_measurement_predict_only_counted_and_reported(ros_node):
         assert 0.85 < float(d['noise_level_position']) < 1.15, d
         assert float(d['noise_level_pressure']) == 0.5, d     # bottom of adapt_range
     finally:
-        stop.set()
-        if th is not None:
-            th.join()
+        if stream is not None:
+            stream.close()
         code, out, err = stop_process(proc)
     assert 'Traceback' not in err, err
     assert 'rejected position' in err
+
+
+def test_blamed_pressure_sensors_position_only_from_then_on(ros_node):
+    """The switch manager blames the chamber pressure sensors on /eha/redundancy: the
+    estimator updates on the position alone from then on (logged once, pressures_used false
+    on /diagnostics). Before, NaN pressures are rejected and counted; after, they are not
+    read at all."""
+    from eha_msgs.msg import RedundancyStatus
+    from eha_ros.nodes.common import latched_qos
+    proc = start_process(cmd('estimator', EST, '-r', '__ns:=/est_p', '-p',
+                             'estimator:estimator.node.diagnostics_period:=0.2'))
+    stream = None
+    try:
+        probe = Probe(ros_node, '/est_p')
+        nan_from = [math.inf]
+
+        def fill(m):
+            if m.seq >= nan_from[0]:
+                m.pressure_a = float('nan')
+
+        stream = Stream(probe, ros_node, fill)
+        assert wait_for(lambda: len(probe.estimates) > 200, 60), 'no estimates on /est_p'
+        nan_from[0] = stream.seq
+        assert wait_for(lambda: any(int(d.get('estimator_rejected_pressure', 0)) > 0
+                                    for d in list(probe.diags)), 20), probe.diags[-1:]
+        status = ros_node.create_publisher(RedundancyStatus, '/est_p/eha/redundancy',
+                                           latched_qos())
+        for _ in range(2):                      # re-sent status: still one log line
+            status.publish(RedundancyStatus(active_channel=1, channel_healthy=[True, True],
+                                            state='ACTIVE_B', pressure_sensors_failed=True))
+        assert wait_for(lambda: any(d.get('pressures_used') == 'False'
+                                    for d in list(probe.diags)), 20), probe.diags[-1:]
+        rejected = int(probe.diags[-1]['estimator_rejected_pressure'])
+        seq = stream.seq
+        assert wait_for(lambda: any(int(d.get('last_seq', 0)) > seq + 300
+                                    for d in list(probe.diags)), 30)
+        d = probe.diags[-1]
+        assert int(d['estimator_rejected_pressure']) == rejected and \
+            int(d['pressure_stops']) == 1, d
+        skipped = [e.seq for _, e in list(probe.estimates) if e.seq > seq and not e.stale
+                   and e.update_skipped]
+        assert not skipped, skipped[:10]
+    finally:
+        if stream is not None:
+            stream.close()
+        code, out, err = stop_process(proc)
+    assert 'Traceback' not in err, err
+    assert err.count('blamed the chamber pressure sensors') == 1, err
 
 
 def test_one_estimate_per_state_same_seq_and_stamp(stack, ros_node):

@@ -501,9 +501,9 @@ def test_one_pressure_sensor_offset_in_loop_keeps_control():
 def test_pressure_sensors_blamed_stop_the_leakage_compensation():
     """pressure_fault (chamber A's sensor 100 bar high from 2 s, Table 3.4 under 10 kN) on the
     softest corner of Table 4.5 with the compensation at alpha 0.5: once the manager blames the
-    sensors, the controller stops adding the leak flow of the wrong p_D (as the controller node
-    does on /eha/redundancy). Kept on, it holds the piston 0.3 mm off its reference on average
-    (tuning seed 1)."""
+    sensors, the controller stops adding the leak flow of the wrong p_D and the estimator
+    stops reading them (as their nodes do on /eha/redundancy). Kept on, the compensation
+    holds the piston 0.3 mm off its reference on average (tuning seed 1)."""
     from eha_ros.core.sim import campaign
     from eha_ros.core.sim import closed_loop as CL
     from eha_ros.core.sim import scenarios as SC
@@ -529,6 +529,7 @@ def test_pressure_sensors_blamed_stop_the_leakage_compensation():
         mean_error[stop] = abs(np.mean(rec[after, CL.R_X0] - ref[after]))
         assert loop.ctl.compensating is not stop
         assert loop.mgr.pressure_sensor_fault and loop.mgr.name == 'ACTIVE_B'
+        assert not loop.est.use_pressure       # the estimator stopped reading them, too
     print(f'mean tracking error after 2.5 s: {mean_error[True] * 1e6:.1f} um stopped, '
           f'{mean_error[False] * 1e6:.1f} um kept on')
     assert mean_error[True] < 50e-6 and mean_error[False] > 200e-6

@@ -6,13 +6,15 @@ channel's motor speed. A NaN or out-of-range measurement gives a predict-only es
 update_skipped = true; it is counted and reported on /diagnostics. A 1 ms timer watches the
 stream: no state for more than estimator.node.stale_time (5 ms) -> predict-only estimates
 marked stale = true, one per timer tick, with the seq the missing states would have had.
+Subscribes eha/redundancy: once the switch manager blames the chamber pressure sensors
+(pressure_sensors_failed) the filter updates on the position alone from then on.
 """
 from __future__ import annotations
 
 import sys
 import time
 
-from eha_msgs.msg import ActuatorState, PositionEstimate
+from eha_msgs.msg import ActuatorState, PositionEstimate, RedundancyStatus
 
 from ..core.estimator.estimator import Estimator
 from ..core.estimator.fault_detector import NAMES
@@ -47,6 +49,8 @@ class EstimatorNode:
         self.pub_diag = diag.publisher(self)
         self.create_subscription(ActuatorState, T.STATE.name, self.on_state,
                                  qos_of(T.STATE, depth=STATE_QUEUE_DEPTH))
+        self.create_subscription(RedundancyStatus, T.REDUNDANCY.name, self.on_redundancy,
+                                 qos_of(T.REDUNDANCY))
         self.create_timer(self.p['estimator.node.timer_period'], self.on_timer)
         self.create_timer(self.p['estimator.node.diagnostics_period'],
                           self.publish_diagnostics)
@@ -92,6 +96,12 @@ class EstimatorNode:
                 throttle_duration_sec=1.0)
         self.publish(r, msg.header.stamp, msg.seq, False)
         self.loop.executed(time.perf_counter() - t0)
+
+    def on_redundancy(self, msg):
+        if msg.pressure_sensors_failed and self.est.stop_pressures():
+            self.c.bump('pressure_stops')
+            self.get_logger().warning('the switch manager blamed the chamber pressure sensors: '
+                                      'the filter updates on the position alone from now on')
 
     def on_verdict(self, verdict: int, seq: int):
         from ..core.estimator import adapt
@@ -152,7 +162,8 @@ class EstimatorNode:
         values.update({'stale': self.stale,
                        'last_seq': self.last_seq if self.last_seq is not None else -1,
                        'sensor_fault': NAMES[self.est.detector.code],
-                       'position_variance_m2': self.est.kf.position_variance})
+                       'position_variance_m2': self.est.kf.position_variance,
+                       'pressures_used': self.est.use_pressure})
         values.update(self.c)
         # the loop thread adds keys: each dict taken in one step (diag.reader)
         values.update({f'estimator_{k}': v for k, v in dict(self.est.counters).items()})

@@ -227,6 +227,16 @@ class Estimator:
         if self.noise_k is not None:
             noise_level.reset(self.noise_k, self.noise_s, self.kf.R, self.kf.R1, self.kf.Q)
 
+    def stop_pressures(self) -> bool:
+        """The chamber pressure sensors were blamed (/eha/redundancy pressure_sensors_failed):
+        from here on the filter updates on the position alone (H1, R1), predicts with its own
+        chamber pressures and the fault detector's torque balance goes without them, as with
+        pressures out of range. Returns True when this call turned them off."""
+        on = self.use_pressure
+        self.use_pressure = False
+        self.kernel[0]['use_pressure'] = 0.0
+        return on
+
     # ------------------------------------------------------------------ checks
     def _position_ok(self, x) -> bool:
         return isinstance(x, (int, float)) and math.isfinite(x) and abs(x) <= self.x_max

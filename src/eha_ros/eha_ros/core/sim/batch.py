@@ -219,8 +219,10 @@ class BatchLoop:
             status, last = (mgr.active, mgr.state), self.last_status
             if status != last and (status[0] != last[0] or mgr.state == 'SWITCHING'):
                 ctl.hold_integrator(self.hold_ticks)   # as the controller node on /eha/redundancy
-            if mgr.pressure_sensor_fault:
-                ctl.stop_leakage_compensation()        # as the controller node, too
+            if mgr.pressure_sensor_fault:              # as the controller and estimator nodes
+                ctl.stop_leakage_compensation()
+                if est is not None:
+                    est.stop_pressures()
             self.last_status = status
         if SAFE.controller_holds(verdict, mgr.state if mgr is not None else None):
             u, self.holding = 0.0, True
