@@ -230,8 +230,9 @@ class Estimator:
     def stop_pressures(self) -> bool:
         """The chamber pressure sensors were blamed (/eha/redundancy pressure_sensors_failed):
         from here on the filter updates on the position alone (H1, R1), predicts with its own
-        chamber pressures and the fault detector's torque balance goes without them, as with
-        pressures out of range. Returns True when this call turned them off."""
+        chamber pressures, and the fault detector goes without them (its jump veto asks the
+        motor shaft), as with readings out of range. Returns True when this call turned them
+        off."""
         on = self.use_pressure
         self.use_pressure = False
         self.kernel[0]['use_pressure'] = 0.0
