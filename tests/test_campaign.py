@@ -3,6 +3,7 @@ figures of the scenarios, a real LocalCluster losing a worker, Ctrl-C and --resu
 external `dask scheduler` + `dask worker` on loopback, bad input."""
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -608,8 +609,45 @@ def test_compare_two_campaigns_run_by_run(tmp_path):
     assert 'pass count: 2 in the first, 2 in the second; 0 fail in both' in moved.stdout
     assert '1 pass in the first only: [0]' in moved.stdout
     assert '1 pass in the second only: [1]' in moved.stdout, moved.stdout
-    bad = subprocess.run(cli + [a, str(tmp_path)], capture_output=True, text=True, timeout=120)
+    (tmp_path / 'empty').mkdir()
+    bad = subprocess.run(cli + [a, str(tmp_path / 'empty')], capture_output=True, text=True,
+                         timeout=120)
     assert bad.returncode == 2 and 'no results.parquet' in bad.stderr and \
+        len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+
+
+def test_compare_two_sets_campaign_by_campaign(tmp_path):
+    """scripts/campaign --compare on two sets (--seeds, several scenarios): each campaign
+    folder against its namesake; what moved, the runs passed per scenario summed over its
+    seeds with the runs lost and gained, the campaigns one side lacks; a set against a single
+    campaign folder: one line, exit 2."""
+    good, nan = [0.0, 1.0, 2.0], [1e-6, float('nan'), 3e-6]
+    for side in ('a', 'b'):
+        _campaign_folder(tmp_path / side / 'step-seed101', nan, good)
+    _campaign_folder(tmp_path / 'a' / 'step-seed102', nan, good, passed=(True, True, False))
+    _campaign_folder(tmp_path / 'b' / 'step-seed102', nan, [0.5, 1.0, 2.0],
+                     passed=(False, True, True))
+    same = tmp_path / 'same'
+    for name in ('step-seed101', 'step-seed102'):
+        shutil.copytree(tmp_path / 'a' / name, same / name)
+    (same / 'summary.md').write_text('not a campaign folder\n')
+    cli = [sys.executable, '-m', 'eha_ros.tools.campaign', '--compare', str(tmp_path / 'a')]
+    res = subprocess.run(cli + [str(same)], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0 and res.stdout.startswith('identical: 2 campaigns, 6 runs'), \
+        res.stdout + res.stderr
+    _campaign_folder(tmp_path / 'b' / 'sine-seed101', nan, good)
+    res = subprocess.run(cli + [str(tmp_path / 'b')], capture_output=True, text=True,
+                         timeout=120)
+    out = res.stdout
+    assert res.returncode == 1, out + res.stderr
+    assert out.startswith('different: 1 of 2 campaigns moved (6 runs)'), out
+    assert '  step-seed102: 1 of 4 columns (passed), 1 of 2 trace arrays; passed 2 -> 2, ' \
+           'lost [2], gained [1]' in out, out
+    assert '  step: 4 -> 4 (lost 1, gained 1; 2 campaigns)' in out, out
+    assert '1 campaigns only in the second: sine-seed101' in out, out
+    bad = subprocess.run(cli + [str(tmp_path / 'a' / 'step-seed101')], capture_output=True,
+                         text=True, timeout=120)
+    assert bad.returncode == 2 and 'one is a set of campaigns' in bad.stderr and \
         len(bad.stderr.strip().splitlines()) == 1, bad.stderr
 
 

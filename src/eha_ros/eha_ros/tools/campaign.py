@@ -31,6 +31,7 @@ every failure). Figures of record come from the held-out seeds 101-105 (--seeds 
 no tuning reads; tuning looks at seeds 1-5 (--seeds tuning). Rerunning a set with the same
 --out keeps its finished campaigns and resumes the unfinished one.
 --compare A B: did a change move anything? (e.g. the same campaign before and after a refactoring)
+Two sets: campaign by campaign, and the runs passed per scenario over its seeds, lost and gained.
 Scale out: on each machine install the repository (scripts/setup), then
   .venv/bin/dask scheduler                       # on one machine, port 8786
   .venv/bin/dask worker tcp://HOST:8786 --nthreads 1 --nworkers N   # on every machine
@@ -75,8 +76,10 @@ def main(argv=None) -> int:
     ap.add_argument('--quiet', action='store_true', help='no progress lines')
     ap.add_argument('--compare', nargs=2, metavar=('DIR_A', 'DIR_B'), default=None,
                     help='run nothing: compare two campaign folders run by run (every column '
-                         'of results.parquet and every trace array, exactly); exit 0 when '
-                         'identical, 1 when not')
+                         'of results.parquet and every trace array, exactly), or two sets '
+                         '(--seeds, several scenarios) campaign by campaign with the runs '
+                         'passed per scenario, lost and gained; exit 0 when identical, 1 when '
+                         'not')
     args = ap.parse_args(argv)
 
     def run():
@@ -84,9 +87,16 @@ def main(argv=None) -> int:
         if args.compare:
             if args.scenario or args.resume:
                 raise UsageError('--compare runs nothing: drop the scenario and --resume')
-            from ..core.sim.compare import compare, summary
-            result = compare(*args.compare)
-            print('\n'.join(summary(result)))
+            from ..core.sim import compare as C
+            a, b = args.compare
+            if C.campaigns(a) or C.campaigns(b):          # sets: campaign by campaign
+                if not (C.campaigns(a) and C.campaigns(b)):
+                    raise UsageError(f'--compare {a} {b}: one is a set of campaigns, the '
+                                     f'other not: give two campaign folders or two sets')
+                result, lines = C.compare_sets(a, b), C.set_summary
+            else:
+                result, lines = C.compare(a, b), C.summary
+            print('\n'.join(lines(result)))
             return 0 if result.identical else 1
         from ..core.sim.campaign import run_campaign
         if args.seed is not None and args.seeds is not None:

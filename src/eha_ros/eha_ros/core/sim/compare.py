@@ -1,4 +1,7 @@
 """Two campaign folders compared run by run: did a change move any figure, and by how much.
+Two sets of campaigns (scripts/campaign with several scenarios or --seeds) are compared
+campaign by campaign, matched by folder name (``<scenario>-seed<seed>``), with the pass counts
+summed per scenario.
 
 Rows are matched by run_id; every column of results.parquet present in both is compared
 exactly (NaN equals NaN), the wall-time bookkeeping aside, and every array of traces.npz. A
@@ -106,4 +109,75 @@ def summary(c: Comparison) -> list[str]:
         if ids:
             lines.append(f'  {len(ids)} runs {side}: {ids[:10]}' + (' ...' if len(ids) > 10
                                                                      else ''))
+    return lines
+
+
+@dataclass
+class SetComparison:
+    pairs: list                            # (campaign folder name, Comparison) in both
+    only_a: list = field(default_factory=list)      # campaign folder names in a only
+    only_b: list = field(default_factory=list)
+
+    @property
+    def identical(self) -> bool:
+        return not (self.only_a or self.only_b) and all(c.identical for _, c in self.pairs)
+
+
+def campaigns(folder: str) -> dict:
+    """{name: path} of the campaign folders of a set (sub-folders holding results.parquet);
+    {} for a single campaign folder or anything else."""
+    if not os.path.isdir(folder) or os.path.isfile(os.path.join(folder, 'results.parquet')):
+        return {}
+    return {name: os.path.join(folder, name) for name in sorted(os.listdir(folder))
+            if os.path.isfile(os.path.join(folder, name, 'results.parquet'))}
+
+
+def compare_sets(folder_a: str, folder_b: str) -> SetComparison:
+    a, b = campaigns(folder_a), campaigns(folder_b)
+    return SetComparison([(n, compare(a[n], b[n])) for n in a if n in b],
+                         sorted(set(a) - set(b)), sorted(set(b) - set(a)))
+
+
+def _ids(ids: list) -> str:
+    return str(ids[:10])[:-1] + (', ...]' if len(ids) > 10 else ']')
+
+
+def set_summary(c: SetComparison) -> list[str]:
+    """Lines for a terminal: the verdict, each campaign that moved, then the runs passed per
+    scenario summed over its seeds (first -> second; lost: pass in the first only)."""
+    runs = sum(x.runs for _, x in c.pairs)
+    moved = [(n, x) for n, x in c.pairs if not x.identical]
+    lines = [f'identical: {len(c.pairs)} campaigns, {runs} runs' if c.identical else
+             f'different: {len(moved)} of {len(c.pairs)} campaigns moved ({runs} runs)']
+    for n, x in moved:
+        cols = sorted(x.differing)
+        line = (f'  {n}: {len(cols)} of {x.columns} columns' +
+                (f' ({", ".join(cols)})' if 0 < len(cols) <= 4 else '') +
+                f', {len(x.traces_differing)} of {x.traces} trace arrays')
+        if x.passed:
+            line += f'; passed {x.passed[0]} -> {x.passed[1]}'
+            if x.pass_only_a:
+                line += f', lost {_ids(x.pass_only_a)}'
+            if x.pass_only_b:
+                line += f', gained {_ids(x.pass_only_b)}'
+        if x.only_a or x.only_b:
+            line += f'; runs in one only: {len(x.only_a)} / {len(x.only_b)}'
+        lines.append(line)
+    totals = {}
+    for n, x in c.pairs:
+        if x.passed:
+            t = totals.setdefault(n.rsplit('-seed', 1)[0], [0, 0, 0, 0, 0])
+            t[0] += x.passed[0]
+            t[1] += x.passed[1]
+            t[2] += len(x.pass_only_a)
+            t[3] += len(x.pass_only_b)
+            t[4] += 1
+    if totals:
+        lines.append('runs passed per scenario, summed over its campaigns (first -> second):')
+        lines += [f'  {name}: {t[0]} -> {t[1]} (lost {t[2]}, gained {t[3]}; {t[4]} campaigns)'
+                  for name, t in totals.items()]
+    for side, names in (('only in the first', c.only_a), ('only in the second', c.only_b)):
+        if names:
+            lines.append(f'  {len(names)} campaigns {side}: {", ".join(names[:10])}' +
+                         (' ...' if len(names) > 10 else ''))
     return lines
