@@ -89,11 +89,12 @@ def main(argv=None) -> int:
                 raise UsageError('--compare runs nothing: drop the scenario and --resume')
             from ..core.sim import compare as C
             a, b = args.compare
-            if C.campaigns(a) or C.campaigns(b):          # sets: campaign by campaign
-                if not (C.campaigns(a) and C.campaigns(b)):
+            set_a, set_b = C.campaigns(a), C.campaigns(b)
+            if set_a or set_b:                            # sets: campaign by campaign
+                if not (set_a and set_b):
                     raise UsageError(f'--compare {a} {b}: one is a set of campaigns, the '
                                      f'other not: give two campaign folders or two sets')
-                result, lines = C.compare_sets(a, b), C.set_summary
+                result, lines = C.compare_sets(set_a, set_b), C.set_summary
             else:
                 result, lines = C.compare(a, b), C.summary
             print('\n'.join(lines(result)))

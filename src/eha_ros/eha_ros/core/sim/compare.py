@@ -87,6 +87,11 @@ def compare(folder_a: str, folder_b: str) -> Comparison:
     return out
 
 
+def _first(items: list, text=str) -> str:
+    """The first ten of ``items`` as ``text`` writes them, ' ...' when there are more."""
+    return text(items[:10]) + (' ...' if len(items) > 10 else '')
+
+
 def summary(c: Comparison) -> list[str]:
     """Lines for a terminal: the verdict first."""
     head = (f'identical: {c.runs} runs, {c.columns} columns, {c.traces} trace arrays'
@@ -101,14 +106,12 @@ def summary(c: Comparison) -> list[str]:
                      f'{c.runs - c.passed[0] - len(c.pass_only_b)} fail in both')
         for side, ids in (('the first', c.pass_only_a), ('the second', c.pass_only_b)):
             if ids:
-                lines.append(f'  {len(ids)} pass in {side} only: {ids[:10]}' +
-                             (' ...' if len(ids) > 10 else ''))
+                lines.append(f'  {len(ids)} pass in {side} only: {_first(ids)}')
     if c.traces_differing:
         lines.append('  traces: ' + ', '.join(c.traces_differing))
     for side, ids in (('only in the first', c.only_a), ('only in the second', c.only_b)):
         if ids:
-            lines.append(f'  {len(ids)} runs {side}: {ids[:10]}' + (' ...' if len(ids) > 10
-                                                                     else ''))
+            lines.append(f'  {len(ids)} runs {side}: {_first(ids)}')
     return lines
 
 
@@ -132,14 +135,10 @@ def campaigns(folder: str) -> dict:
             if os.path.isfile(os.path.join(folder, name, 'results.parquet'))}
 
 
-def compare_sets(folder_a: str, folder_b: str) -> SetComparison:
-    a, b = campaigns(folder_a), campaigns(folder_b)
+def compare_sets(a: dict, b: dict) -> SetComparison:
+    """Two sets as :func:`campaigns` lists them, campaign by campaign."""
     return SetComparison([(n, compare(a[n], b[n])) for n in a if n in b],
                          sorted(set(a) - set(b)), sorted(set(b) - set(a)))
-
-
-def _ids(ids: list) -> str:
-    return str(ids[:10])[:-1] + (', ...]' if len(ids) > 10 else ']')
 
 
 def set_summary(c: SetComparison) -> list[str]:
@@ -157,9 +156,9 @@ def set_summary(c: SetComparison) -> list[str]:
         if x.passed:
             line += f'; passed {x.passed[0]} -> {x.passed[1]}'
             if x.pass_only_a:
-                line += f', lost {_ids(x.pass_only_a)}'
+                line += f', lost {_first(x.pass_only_a)}'
             if x.pass_only_b:
-                line += f', gained {_ids(x.pass_only_b)}'
+                line += f', gained {_first(x.pass_only_b)}'
         if x.only_a or x.only_b:
             line += f'; runs in one only: {len(x.only_a)} / {len(x.only_b)}'
         lines.append(line)
@@ -178,6 +177,5 @@ def set_summary(c: SetComparison) -> list[str]:
                   for name, t in totals.items()]
     for side, names in (('only in the first', c.only_a), ('only in the second', c.only_b)):
         if names:
-            lines.append(f'  {len(names)} campaigns {side}: {", ".join(names[:10])}' +
-                         (' ...' if len(names) > 10 else ''))
+            lines.append(f'  {len(names)} campaigns {side}: {_first(names, ", ".join)}')
     return lines
