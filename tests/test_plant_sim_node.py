@@ -113,7 +113,7 @@ def test_state_stream_at_1khz(probe):
     deadlines (counted, docs/nodes/plant_side.md), which lowers it."""
     probe.states.clear(); probe.arrivals.clear()
     probe.wait_ticks(3000)
-    st = probe.states
+    st = list(probe.states)      # one snapshot: the subscriber keeps appending meanwhile
     seqs = np.array([s.seq for s in st])
     stamps = np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in st])
     rate = (seqs[-1] - seqs[0]) / (stamps[-1] - stamps[0])
