@@ -122,7 +122,6 @@ class Estimator:
         self.kf = build_filter(params)
         self.chambers = isinstance(self.kf, ChamberKF)
         self.is_model = self.chambers or isinstance(self.kf, ModelKF)
-        self.use_pressure = self.is_model and self.kf.with_pressure
         self.x_max = 0.5 * pp.stroke + POSITION_MARGIN
         self.pressure_min = params[e + 'validity.pressure_min']
         self.pressure_max = params[e + 'validity.pressure_max']
@@ -234,9 +233,14 @@ class Estimator:
         motor shaft), as with readings out of range. Returns True when this call turned them
         off."""
         on = self.use_pressure
-        self.use_pressure = False
         self.kernel[0]['use_pressure'] = 0.0
         return on
+
+    @property
+    def use_pressure(self) -> bool:
+        """The filter updates on the chamber pressures: a model filter that measures them,
+        until :meth:`stop_pressures`. Kept in one place, the compiled tick's constants."""
+        return bool(self.kernel[0]['use_pressure'][0] > 0.5)
 
     # ------------------------------------------------------------------ checks
     def _position_ok(self, x) -> bool:

@@ -136,12 +136,13 @@ def pack(est):
     k, e = K[0], E[0]
     arrays = pack_filter(kf, k, e, est.is_model, est.chambers)
     for name in ('x_max', 'pressure_min', 'pressure_max', 'max_abs_motor_speed',
-                 'alpha_pressure', 'alpha_friction', 'use_pressure', 'isolate', 'i_load',
+                 'alpha_pressure', 'alpha_friction', 'isolate', 'i_load',
                  'q_load', 'q_load_jump', 'load_jump_z', 'load_hold',
                  'q_x', 'q_x_disagree',
                  'position_gm_sigma', 'q_flow', 'flow_gate', 'flow_ticks', 'flow_share',
                  'flow_report', 'q_x_offset', 'alpha_load', 'hold_rate'):
         k[name] = getattr(est, name)
+    k['use_pressure'] = est.is_model and est.kf.with_pressure   # until stop_pressures
     k['monitor'], e['monitor'] = est.monitor_k, est.monitor_s
     if est.noise_k is not None:
         k['noise_adapt'], k['noise'] = 1.0, est.noise_k
