@@ -119,3 +119,28 @@ def test_joseph_update_over_any_sparse_h_is_the_dense_one_to_the_bit(n, m):
         H[m - 1, 0] = -0.7
         _same_bits_as_dense(H, rng)
     assert np.count_nonzero(H) < m * n             # I - K H really has zeros to skip
+
+
+@njit(cache=False)
+def numpy_inv(S):
+    return np.linalg.inv(S)
+
+
+@pytest.mark.parametrize('m', [1, 2, 3])
+def test_inverse_is_np_linalg_inv_to_the_bit(m):
+    """kernels.inverse makes np.linalg.inv's LAPACK calls on the update's scratch (no
+    allocation): the same bits on innovation covariances of the estimator's scales (position
+    in m^2, pressures in Pa^2, correlated), and its errors."""
+    rng = np.random.default_rng(m)
+    Sinv, ipiv = np.empty(m * m), np.empty(m, np.int32)
+    for _ in range(500):
+        C = rng.normal(size=(m, m))
+        d = 10.0 ** rng.uniform(-6, 6, size=m)
+        S = d[:, None] * (C @ C.T + 0.5 * np.eye(m)) * d[None, :]
+        K.inverse(S, Sinv, ipiv)
+        assert np.array_equal(Sinv.reshape(m, m).T, numpy_inv(S))
+    S[0, 0] = np.nan
+    with pytest.raises(np.linalg.LinAlgError, match='infs or NaNs'):
+        K.inverse(S, Sinv, ipiv)
+    with pytest.raises(np.linalg.LinAlgError, match='singular'):
+        K.inverse(np.zeros((m, m)), Sinv, ipiv)

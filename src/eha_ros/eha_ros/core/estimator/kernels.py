@@ -5,7 +5,8 @@ The arrays are updated in place by small product helpers (:func:`mul`, :func:`mu
 n^3 products of each step, F P F' and (I - K H) P (I - K H)', go through :func:`sandwich`,
 which skips the exact zeros of F and of I - K H (the chamber filter's F has 29 non-zero
 entries of 144) and keeps the dense products' bits. With the scratch of :func:`scratch` and
-:func:`workspace_size` a filter step allocates nothing but the m x m inverse.
+:func:`workspace_size` a filter step allocates nothing (S^-1 from np.linalg.inv's LAPACK calls
+into the scratch: :func:`inverse`).
 filterpy's KalmanFilter computes the same (its update() is the Joseph form too) and is used as
 the reference in the tests.
 """
@@ -14,7 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.np.linalg import _LAPACK
 
 
 @njit(cache=True, inline='always')
@@ -123,7 +125,32 @@ def predict(x, P, F, G, u, Q, tmp):
 @njit(cache=True)
 def workspace_size(n: int, m: int) -> int:
     """Scratch floats that :func:`update_ws` needs for n states and m measurements."""
-    return 3 * n * m + 4 * n * n + 2 * n
+    return 3 * n * m + 4 * n * n + 2 * n + m * m + m
+
+
+# The LAPACK routines np.linalg.inv calls in numba (getrf, then getri: numba's own bindings of
+# scipy's LAPACK), called on the update's scratch by :func:`inverse`
+_GETRF = _LAPACK().numba_xxgetrf(types.float64)
+_GETRI = _LAPACK().numba_ez_xxgetri(types.float64)
+_DOUBLE = ord('d')
+
+
+@njit(cache=True)
+def inverse(S, Sinv, ipiv) -> None:
+    """Sinv <- S^-1, column-major (m^2 floats; ``ipiv``: m int32), by the LAPACK calls of
+    np.linalg.inv: its bits and its errors (LinAlgError on a non-finite or singular S), without
+    the two arrays it allocates per call."""
+    m = S.shape[0]
+    for i in range(m):
+        for j in range(m):
+            if not math.isfinite(S[i, j]):
+                raise np.linalg.LinAlgError('Array must not contain infs or NaNs.')
+            Sinv[j * m + i] = S[i, j]
+    r = _GETRF(_DOUBLE, m, m, Sinv.ctypes, m, ipiv.ctypes)
+    if r == 0:
+        r = _GETRI(_DOUBLE, m, Sinv.ctypes, m, ipiv.ctypes)
+    if r != 0:
+        raise np.linalg.LinAlgError('Matrix is singular to machine precision.')
 
 
 @njit(cache=True)
@@ -166,11 +193,21 @@ def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_moved, moved_gate):
     T = ws[o:o + n * n].reshape((n, n))
     o += n * n
     dx = ws[o:o + n]
+    o += n
+    W = ws[o:o + (2 * n + 1) * n].reshape((2 * n + 1, n))     # sandwich's scratch
+    o += (2 * n + 1) * n
+    Sinv = ws[o:o + m * m]                     # S^-1, column-major
+    ipiv = ws[o + m * m:o + m * m + m].view(np.int32)
     mul(P, H, PHt, None, False, True, False)
     mulv(H, x, y, z, True)                     # y = z - H x
     mul(H, PHt, S, R, False, False, False)     # S = R + H P H'
-    Si = np.linalg.inv(S)
-    mul(PHt, Si, K, None, False, False, False)
+    inverse(S, Sinv, ipiv)
+    for i in range(n):                         # K = P H' S^-1
+        for j in range(m):
+            s = 0.0
+            for k in range(m):
+                s += PHt[i, k] * Sinv[j * m + k]
+            K[i, j] = s
     if i_moved >= 0 and moved_gate > 0.0:
         for j in range(1, m):
             if abs(y[j]) > moved_gate * math.sqrt(S[j, j]):
@@ -189,7 +226,7 @@ def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_moved, moved_gate):
     nis = 0.0
     for i in range(m):
         for j in range(m):
-            nis += y[i] * Si[i, j] * y[j]
+            nis += y[i] * Sinv[j * m + i] * y[j]
     mulv(K, y, dx, None, False)
     for i in range(n):
         x[i] += dx[i]
@@ -199,7 +236,6 @@ def update_gated(x, P, H, R, z, y, S, ws, i_frozen, gate, i_moved, moved_gate):
             IKH[i, j] = 1.0 if i == j else 0.0
     mul(K, H, IKH, IKH, True, False, False)
     mul(K, R, KR, None, False, False, False)
-    W = ws[o + n:o + n + (2 * n + 1) * n].reshape((2 * n + 1, n))
     sandwich(IKH, P, None, T, W)               # I - K H is I but in H's columns
     mul(KR, K, P, P, False, True, True)
     return nis

@@ -235,13 +235,13 @@ def substep(S, P, U, k, T):
 
 
 @njit(cache=True, error_model='numpy')
-def tick(S, P, U, T, n_sub, noise, row, meas):
+def tick(S, P, U, T, n_sub, noise, row, meas, backup):
     """Advance S by one tick (n_sub sub-steps, inputs U held) and sample the sensors.
 
-    If the state became non-finite (should not happen for finite inputs) it is restored and
-    False is returned.
+    If the state became non-finite (should not happen for finite inputs) it is restored from
+    ``backup`` (scratch of S's size: no allocation per tick) and False is returned.
     """
-    backup = S.copy()
+    backup[:] = S
     for k in range(n_sub):
         substep(S, P, U, k, T)
     ok = True

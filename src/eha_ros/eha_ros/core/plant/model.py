@@ -89,7 +89,7 @@ class EhaPlant:
         # the compiled step's arrays, made once: reset() and a new noise block write into them
         self.arrays = PS.Arrays(np.zeros(L.NSTATE), pack(self.p), np.zeros(L.NIN),
                                 leakage_table(self.p), self._noise.block, np.zeros(L.NM), aux,
-                                self._delay.ring, self.faults.table)
+                                self._delay.ring, self.faults.table, np.zeros(L.NSTATE))
         # called per tick without typing the record again (kernel_records.entry_point)
         self._step = entry_point(PS.step, self.arrays, self._nsub, 0.0, 0.0)
         self.reset()

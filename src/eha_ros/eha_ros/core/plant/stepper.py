@@ -47,6 +47,7 @@ class Arrays(NamedTuple):
     aux: Vector         # the scalars (A_*)
     ring: Vector        # drive delay FIFO (drive.SpeedDelay)
     table: Matrix       # active faults (faults.FaultSet)
+    backup: Vector      # S before the tick (integrator.tick restores it if it turned non-finite)
 
 
 @njit(cache=True)
@@ -74,6 +75,6 @@ def step(a, nsub, omega_ref, load_force) -> None:
         aux[A_FAULTED] = 1.0 if nf > 0 else 0.0
     row = int(aux[A_NOISE_K])
     aux[A_NOISE_K] = row + 1
-    if not tick(a.S, a.P, U, a.T, nsub, a.block, row, a.meas):
+    if not tick(a.S, a.P, U, a.T, nsub, a.block, row, a.meas, a.backup):
         aux[A_VALID] = 0.0
     aux[A_T] += aux[A_TS]
