@@ -143,8 +143,11 @@ def test_nan_measurement_predict_only_counted_and_reported(ros_node):
             assert abs(e.position - 1e-3) < 1e-4
         assert wait_for(lambda: any(int(d.get('estimator_rejected_position', 0)) >= len(answered)
                                     for d in list(probe.diags)), 10), str(probe.diags[-1:])
-        good = [by_seq[s] for s in range(first + 100, first + 200) if s in by_seq]
-        assert good and not any(e.update_skipped for e in good)
+        # the good states after the NaN ones are updates again; a loaded machine may lose a
+        # stretch of estimates on their way to the probe (CI: all of seqs first+100..+199)
+        good = [e for s, e in by_seq.items() if first + 50 < s <= first + 300]
+        assert len(good) >= 20, f'{len(good)} estimates of the 250 good states after the NaN ones'
+        assert not any(e.update_skipped for e in good)
         d = probe.diags[-1]
         assert int(d['estimator_skipped_updates']) >= len(answered)
         assert int(d['rejected_states']) >= len(answered)
