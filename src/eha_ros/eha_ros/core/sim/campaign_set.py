@@ -44,6 +44,16 @@ def parse_seeds(text: str) -> list[int]:
     return sorted(set(out))
 
 
+def campaign_folder(out: str, scenario: str, seed: int) -> str:
+    """The folder of one scenario on one seed in the set DIR ``out``."""
+    return os.path.join(out, f'{scenario}-seed{seed}')
+
+
+def scenario_of(folder_name: str) -> str:
+    """The scenario of a campaign folder's name (:func:`campaign_folder`'s last part)."""
+    return folder_name.rsplit('-seed', 1)[0]
+
+
 def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=print,
             progress: bool = True, report: bool = True, config_dir: str | None = None,
             plant_params: str | None = None, oracle: bool = False) -> dict:
@@ -60,7 +70,7 @@ def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=pri
     for scn in loaded:                                  # a kept folder is of the same estimator
         want = scn.oracle or oracle
         for seed in seeds:
-            d = os.path.join(out, f'{scn.name}-seed{seed}')
+            d = campaign_folder(out, scn.name, seed)
             info = _info(d)
             if info is not None and bool((info.get('scenario') or {}).get('oracle')) != want:
                 raise UsageError(f'{d} holds a campaign {"without" if want else "with"} '
@@ -70,7 +80,7 @@ def run_set(scenarios: list, family: str, seeds: list, out: str, client, log=pri
     folders = {}
     for scn, name in zip(scenarios, names):
         for seed in seeds:
-            d = os.path.join(out, f'{name}-seed{seed}')
+            d = campaign_folder(out, name, seed)
             folders[(name, seed)] = d
             info = _info(d)
             if info is not None and info.get('complete'):

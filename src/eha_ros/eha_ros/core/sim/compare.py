@@ -1,7 +1,7 @@
 """Two campaign folders compared run by run: did a change move any figure, and by how much.
 Two sets of campaigns (scripts/campaign with several scenarios or --seeds) are compared
-campaign by campaign, matched by folder name (``<scenario>-seed<seed>``), with the pass counts
-summed per scenario.
+campaign by campaign, matched by folder name (core.sim.campaign_set.campaign_folder), with the
+pass counts summed per scenario.
 
 Rows are matched by run_id; every column of results.parquet present in both is compared
 exactly (NaN equals NaN), the wall-time bookkeeping aside, and every array of traces.npz. A
@@ -15,6 +15,8 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .campaign_set import scenario_of
 
 # columns that measure the machine, not the loop
 TIMING = ('wall_s', 'elapsed_s', 'worker', 'duration_s')
@@ -165,7 +167,7 @@ def set_summary(c: SetComparison) -> list[str]:
     totals = {}
     for n, x in c.pairs:
         if x.passed:
-            t = totals.setdefault(n.rsplit('-seed', 1)[0], [0, 0, 0, 0, 0])
+            t = totals.setdefault(scenario_of(n), [0, 0, 0, 0, 0])
             t[0] += x.passed[0]
             t[1] += x.passed[1]
             t[2] += len(x.pass_only_a)
