@@ -124,6 +124,29 @@ def _report(k, s, now_jump, now_stuck, now_drift) -> int:
 
 
 @njit(cache=True)
+def _compressed(k, s, pz, pa, pb, pv) -> bool:
+    """The jump veto on one of a run's first VETO_SAMPLES samples (detect's docstring): True
+    when the oil compressed."""
+    # the oil compressed: the pressures' innovation, or the measured p_D itself moved
+    # from its last value before the run; with one sensor valid (the other one failed or
+    # out of its range), that chamber's pressure; none valid: no veto by them
+    compressed = COMPRESSION_SHARE * k[FK_PD_PER_M] * s[FS_STEP]
+    if pa == pa and pb == pb:
+        moved = abs(pa - pb - s[FS_PDREF]) >= compressed
+    elif pa == pa:
+        moved = abs(pa - s[FS_PREF]) >= 0.5 * compressed
+    elif pb == pb:
+        moved = abs(pb - s[FS_PREF + 1]) >= 0.5 * compressed
+    else:
+        moved = False
+    # a reading missing: the loaded chamber's may be the one, and the other one may sit on
+    # its check valve and not move; the shaft feels the load's torque within the tick
+    if not (pa == pa and pb == pb) and not moved:
+        moved = abs(pv - s[FS_PVREF]) >= compressed        # False when either is NaN
+    return pz >= k[FK_JUMP_PVETO] or (compressed > 0.0 and moved)
+
+
+@njit(cache=True)
 def detect(k, s, z, innovation, S, pz, pa, pb, w, i) -> int:
     """One position sample z (m) with its innovation (m) and innovation variance S (m^2); pz:
     the largest normalised pressure innovation of the same update (0: none); pa, pb: the
@@ -161,25 +184,8 @@ def detect(k, s, z, innovation, S, pz, pa, pb, w, i) -> int:
         s[FS_PREF] = s[FS_P1]
         s[FS_PREF + 1] = s[FS_P1 + 1]
         s[FS_PVREF] = s[FS_PV1]
-    if 0 < s[FS_NJUMP] <= VETO_SAMPLES:
-        # the oil compressed: the pressures' innovation, or the measured p_D itself moved
-        # from its last value before the run; with one sensor valid (the other one failed or
-        # out of its range), that chamber's pressure; none valid: no veto by them
-        compressed = COMPRESSION_SHARE * k[FK_PD_PER_M] * s[FS_STEP]
-        if pa == pa and pb == pb:
-            moved = abs(pa - pb - s[FS_PDREF]) >= compressed
-        elif pa == pa:
-            moved = abs(pa - s[FS_PREF]) >= 0.5 * compressed
-        elif pb == pb:
-            moved = abs(pb - s[FS_PREF + 1]) >= 0.5 * compressed
-        else:
-            moved = False
-        # a reading missing: the loaded chamber's may be the one, and the other one may sit on
-        # its check valve and not move; the shaft feels the load's torque within the tick
-        if not (pa == pa and pb == pb) and not moved:
-            moved = abs(pv - s[FS_PVREF]) >= compressed        # False when either is NaN
-        if pz >= k[FK_JUMP_PVETO] or (compressed > 0.0 and moved):
-            s[FS_STEPPED] = 0.0
+    if 0 < s[FS_NJUMP] <= VETO_SAMPLES and _compressed(k, s, pz, pa, pb, pv):
+        s[FS_STEPPED] = 0.0
     s[FS_YPREV] = innovation
     if pa == pa and pb == pb:
         s[FS_PD1] = pa - pb
