@@ -87,10 +87,25 @@ def python_module(module: str, *args) -> list:
 
 
 def free_port() -> int:
-    """A TCP port free on the loopback right now."""
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
+    """A TCP port free on the loopback right now, drawn below the kernel's ephemeral range: a
+    port the kernel hands out itself (bind to port 0, the local end of a connection) can be
+    taken again between this call and the server's bind (CI: the live view's server found its
+    port in use, once)."""
+    import random
+    try:
+        with open('/proc/sys/net/ipv4/ip_local_port_range') as fh:
+            first = int(fh.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        first = 32768
+    for _ in range(200):
+        port = random.SystemRandom().randrange(max(1024, first - 12000), first)
+        with socket.socket() as s:
+            try:
+                s.bind(('127.0.0.1', port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError('no free TCP port below the ephemeral range')
 
 
 class Spinner:
