@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -89,9 +90,8 @@ def python_module(module: str, *args) -> list:
 def free_port() -> int:
     """A TCP port free on the loopback right now, drawn below the kernel's ephemeral range: a
     port the kernel hands out itself (bind to port 0, the local end of a connection) can be
-    taken again between this call and the server's bind (CI: the live view's server found its
-    port in use, once)."""
-    import random
+    taken again between this call and the server's bind (the live view's server found its port
+    in use, once in three runs here)."""
     try:
         with open('/proc/sys/net/ipv4/ip_local_port_range') as fh:
             first = int(fh.read().split()[0])

@@ -365,8 +365,8 @@ def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path, ro
         assert seqs[0] <= 1, (topic, seqs[0])       # from the loop's first tick
         if topic == '/eha/command' and 0 in seqs:
             # seq 0 answers no estimate (contract): the controller's watchdog, which a loaded
-            # machine can trip at start-up (CI: 7 between the commands of ticks 1 and 2); it
-            # is logged, and it is not a tick of the loop
+            # machine can trip at start-up (CI: 7 of them, the first between the commands of ticks
+            # 1 and 2); it is logged, and it is not a tick of the loop
             assert 'no fresh estimate for' in log, log[-3000:]
             seqs = [s for s in seqs if s != 0]
         # in order and no gap; a tick's message may be there twice (CI: the command of tick 2
