@@ -2,14 +2,14 @@
 from __future__ import annotations
 
 import os
-import random
 import signal
-import socket
 import subprocess
 import sys
 import threading
 import time
 import zlib
+
+from eha_ros.core.io.ports import free_port  # noqa: F401  (the tests import it from here)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 VENV_BIN = os.path.join(ROOT, '.venv', 'bin')
@@ -85,27 +85,6 @@ def stop_process(proc: subprocess.Popen, timeout: float = 10.0):
 
 def python_module(module: str, *args) -> list:
     return [sys.executable, '-m', module, *args]
-
-
-def free_port() -> int:
-    """A TCP port free on the loopback right now, drawn below the kernel's ephemeral range: a
-    port the kernel hands out itself (bind to port 0, the local end of a connection) can be
-    taken again between this call and the server's bind (the live view's server found its port
-    in use, once in three runs here)."""
-    try:
-        with open('/proc/sys/net/ipv4/ip_local_port_range') as fh:
-            first = int(fh.read().split()[0])
-    except (OSError, ValueError, IndexError):
-        first = 32768
-    for _ in range(200):
-        port = random.SystemRandom().randrange(max(1024, first - 12000), first)
-        with socket.socket() as s:
-            try:
-                s.bind(('127.0.0.1', port))
-            except OSError:
-                continue
-            return port
-    raise RuntimeError('no free TCP port below the ephemeral range')
 
 
 class Spinner:

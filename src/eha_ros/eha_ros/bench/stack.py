@@ -17,6 +17,7 @@ import tempfile
 import time
 
 from ..core import topics as T
+from ..core.io.ports import free_port
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']
 GOALS = {'answered_fraction': 0.999, 'latency_p99_s': 1e-3, 'cpu_total_cores': 1.0,
@@ -38,7 +39,7 @@ def measure_stack(duration: float, lockstep: bool = False, composed: bool = Fals
     from ..monitor import CpuMeter, DiagMonitor
     from ..stack import Stack
     monitor = DiagMonitor('bench_stack')
-    port = _free_port() if live else None
+    port = free_port() if live else None
     tmp = tempfile.TemporaryDirectory() if record else None
     stack = Stack(NODES, lockstep=lockstep, composed=composed, log_dir=log_dir,
                   live=port, record=os.path.join(tmp.name, 'bench.mcap') if tmp else None
@@ -114,13 +115,6 @@ def wait_running(stack, monitor, timeout: float = 90.0) -> None:
             raise RuntimeError(f'the loop did not start within {timeout:g} s '
                                f'(exited: {stack.dead()})')
         time.sleep(0.1)
-
-
-def _free_port() -> int:
-    import socket
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
 
 
 class _Viewer:

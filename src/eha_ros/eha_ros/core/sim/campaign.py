@@ -22,7 +22,6 @@ import json
 import math
 import os
 import signal
-import socket
 import sys
 import threading
 import time
@@ -32,6 +31,7 @@ import numpy as np
 
 from ..config.cli import UsageError
 from ..config.params import ParamError
+from ..io.ports import is_free
 from ..io.report import write_json
 from ..qft.spec import configured_spec
 from . import family as FAM
@@ -147,15 +147,6 @@ def plant_limits(scn, multipliers: dict, nominal: dict | None = None,
 
 
 # ------------------------------------------------------------------------------ engine
-def _free_port(port: int) -> bool:
-    with socket.socket() as s:
-        try:
-            s.bind(('127.0.0.1', port))
-            return True
-        except OSError:
-            return False
-
-
 # A campaign worker computes: its event loop thread wakes less (statistical profiler every
 # 10 ms, loop tick every 20 ms, system monitor every 0.5 s by default), each wake taking the
 # GIL from the run. Measured on 1 worker, the same 30 runs in turns as a task and inside the
@@ -202,7 +193,7 @@ def connect(workers: int | None, scheduler: str | None, quiet: bool = False):
     try:
         with dask.config.set(QUIET_WORKER):
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=':8787' if _free_port(8787) else ':0',
+                                   dashboard_address=':8787' if is_free(8787) else ':0',
                                    silence_logs=logging.ERROR)
     finally:
         if main:
