@@ -1,6 +1,7 @@
 """estimator node as a separate process over DDS: one estimate per state with the same seq and
 stamp, NaN measurement -> predict only, counted and reported, stale when the states stop,
 bad parameters -> one line and exit 2."""
+import contextlib
 import math
 import os
 import subprocess
@@ -110,29 +111,41 @@ class Stream:
         self.th.join()
 
 
+@contextlib.contextmanager
+def crafted(ros_node, ns, fill):
+    """An estimator alone on ``ns``, fed a crafted :class:`Stream` with ``fill`` until it
+    answers (discovery); yields (probe, stream, log), log['err'] its stderr once stopped."""
+    proc = start_process(cmd('estimator', EST, '-r', f'__ns:={ns}', '-p',
+                             'estimator:estimator.node.diagnostics_period:=0.2'))
+    log, stream = {}, None
+    try:
+        probe = Probe(ros_node, ns)
+        stream = Stream(probe, ros_node, fill)
+        assert wait_for(lambda: len(probe.estimates) > 200, 60), \
+            f'no estimates from the estimator on {ns}'
+        yield probe, stream, log
+    finally:
+        if stream is not None:
+            stream.close()
+        log['err'] = stop_process(proc)[2]
+    assert 'Traceback' not in log['err'], log['err']
+
+
 def test_nan_measurement_predict_only_counted_and_reported(ros_node):
     """A crafted state stream to an estimator alone on /est_test; a few NaN positions."""
-    proc = start_process(cmd('estimator', EST, '-r', '__ns:=/est_test', '-p',
-                             'estimator:estimator.node.diagnostics_period:=0.2'))
-    stream = None
-    try:
-        probe = Probe(ros_node, '/est_test')
-        nan_seqs = set()
+    nan_seqs = set()
 
-        def fill(m):
-            if m.seq in nan_seqs:
-                m.position = float('nan')
+    def fill(m):
+        if m.seq in nan_seqs:
+            m.position = float('nan')
 
-        stream = Stream(probe, ros_node, fill)
-        # stream good states until the estimator answers (discovery), then inject NaN
-        assert wait_for(lambda: len(probe.estimates) > 200, 60), \
-            'no estimates from the estimator on /est_test'
+    # good states until the estimator answers (discovery), then NaN
+    with crafted(ros_node, '/est_test', fill) as (probe, stream, log):
         first = stream.seq + 100
         nan_seqs.update(range(first, first + 5))
         nan_seqs.add(first + 50)
         assert wait_for(lambda: any(e.seq > first + 300 for _, e in list(probe.estimates)), 30)
         stream.close()
-        stream = None
         by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
         answered = [s for s in nan_seqs if s in by_seq]
         # on a heavily loaded machine the estimator may miss a state (then counted as lost)
@@ -155,12 +168,36 @@ def test_nan_measurement_predict_only_counted_and_reported(ros_node):
         # datasheet's white sigma (10 um; no Gauss-Markov part: 0.99), its pressures none
         assert 0.85 < float(d['noise_level_position']) < 1.15, d
         assert float(d['noise_level_pressure']) == 0.5, d     # bottom of adapt_range
-    finally:
-        if stream is not None:
-            stream.close()
-        code, out, err = stop_process(proc)
-    assert 'Traceback' not in err, err
-    assert 'rejected position' in err
+    assert 'rejected position' in log['err']
+
+
+def test_a_two_sample_glitch_is_held_back_counted_and_logged(ros_node):
+    """Two consecutive states read 1 mm off (a glitch of the position sensor): the estimator
+    does not take them (a suspected jump, fault_detector.suspect), reports no fault, counts
+    them on /diagnostics (jump_suspect_samples) and logs them once."""
+    glitch = set()
+
+    def fill(m):
+        if m.seq in glitch:
+            m.position += 1e-3
+
+    with crafted(ros_node, '/est_glitch', fill) as (probe, stream, log):
+        first = stream.seq + 100
+        glitch.update((first, first + 1))
+        assert wait_for(lambda: any(e.seq > first + 300 for _, e in list(probe.estimates)), 30)
+        stream.close()
+        by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
+        near = [e for s, e in by_seq.items() if first <= s <= first + 50]
+        assert near, 'no estimate around the glitch reached the probe'
+        assert all(abs(e.position - 1e-3) < 50e-6 for e in near), \
+            max(abs(e.position - 1e-3) for e in near)
+        assert not any(e.sensor_fault for e in near)
+        assert wait_for(lambda: any(int(d.get('jump_suspect_samples', 0)) > 0
+                                    for d in list(probe.diags)), 10), str(probe.diags[-1:])
+        d = probe.diags[-1]
+        assert 1 <= int(d['jump_suspect_samples']) <= 2, d
+        assert int(d['detections_jump']) == 0 and d['consistency'] == 'ok', d
+    assert log['err'].count('held back as a suspected sensor jump') == 1, log['err']
 
 
 def test_blamed_pressure_sensors_position_only_from_then_on(ros_node):

@@ -40,6 +40,7 @@ class EstimatorNode:
         self.last_arrival = None
         self.last_seq = None
         self.verdict = 0                  # core.estimator.adapt verdict last logged
+        self.suspect_logged = 0           # the detector's suspect samples last logged
         self.stale = False
         self.stale_seq = 0
         self.msg = PositionEstimate()
@@ -170,6 +171,12 @@ class EstimatorNode:
         values['estimator_updates'] = self.est.updates      # beside skipped/isolated_updates
         for code, n in dict(self.est.detector.detections).items():
             values[f'detections_{NAMES[code]}'] = n
+        suspect = values['jump_suspect_samples'] = self.est.detector.suspect_samples
+        if suspect > self.suspect_logged:     # once per diagnostics period that had any
+            self.get_logger().warning(f'{suspect - self.suspect_logged} position samples held '
+                                      f'back as a suspected sensor jump (jump_suspect_samples '
+                                      f'{suspect})')
+        self.suspect_logged = suspect
         if self.est.is_model and self.est.kf.i_leak is not None:
             values['leak_correction_m3_per_s_pa'] = self.est.kf.leak_correction
         alphas = self.est.friction_alphas

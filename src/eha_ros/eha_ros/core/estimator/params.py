@@ -102,7 +102,8 @@ STAGES = {
     'hold_blend': Stage('while the piston rests under a held load, publish the sensor reading '
                         'without its white noise, x_hat + b (model.hold_blend_time)'),
     'isolate': Stage('skip the position update (predict only, adapted model) while a sensor '
-                     'fault (jump or stuck) is reported'),
+                     'fault (jump or stuck) is reported, and undo it on the samples of a '
+                     'suspected jump (fault_detector.suspect) until its debounce decides'),
     'chinniah': Stage('run the Chinniah 3-state and 4-state friction estimators (eqs. '
                       '4.15-4.29) on the estimate (analysis; not in the default list)',
                       default=False),
