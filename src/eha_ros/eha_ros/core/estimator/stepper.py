@@ -453,15 +453,16 @@ def estimate(K, E, a, position, w, i, pa, pb):
         # unreported and the loop moved the piston by the bias
         x[:] = a.x_prior
         P[:] = a.P_prior
-    elif k.chambers > 0.5:
-        lam, dlt, kap = k.leakage_range, k.displacement_range, k.compliance_range
-        phi, eps = k.friction_range, k.external_leakage_range
-        e.edge = adapt.project(x, int(k.i_leakage), lam[0], lam[1], int(k.i_displacement),
-                               dlt[0], dlt[1], int(k.i_compliance), kap[0], kap[1],
-                               int(k.i_friction), phi[0], phi[1], int(k.i_external_leakage),
-                               eps[0], eps[1], int(k.i_gm), k.offset_bound, e.clipped,
-                               adapt.EDGE_TICKS)
-    e.updates += 1
+    else:
+        e.updates += 1
+        if k.chambers > 0.5:
+            lam, dlt, kap = k.leakage_range, k.displacement_range, k.compliance_range
+            phi, eps = k.friction_range, k.external_leakage_range
+            e.edge = adapt.project(x, int(k.i_leakage), lam[0], lam[1], int(k.i_displacement),
+                                   dlt[0], dlt[1], int(k.i_compliance), kap[0], kap[1],
+                                   int(k.i_friction), phi[0], phi[1],
+                                   int(k.i_external_leakage), eps[0], eps[1], int(k.i_gm),
+                                   k.offset_bound, e.clipped, adapt.EDGE_TICKS)
     if k.chambers > 0.5:
         # does the load swing? (read by consistency: the position noise)
         adapt.load_swinging(x, e.load, k.swing_band, k.load_hold)
