@@ -144,7 +144,14 @@ def test_nan_measurement_predict_only_counted_and_reported(ros_node):
         first = stream.seq + 100
         nan_seqs.update(range(first, first + 5))
         nan_seqs.add(first + 50)
-        assert wait_for(lambda: any(e.seq > first + 300 for _, e in list(probe.estimates)), 30)
+        # the good states after the NaN ones are updates again. A loaded machine may lose a
+        # stretch of estimates on their way to the probe (CI: first+100..+199 once, all 250 of
+        # first+51..+300 another time): the stream runs until 20 of them came, not a set time
+        def good():
+            return [e for _, e in list(probe.estimates) if e.seq > first + 50 and not e.stale]
+
+        assert wait_for(lambda: len(good()) >= 20, 60), \
+            f'{len(good())} fresh estimates of the good states after the NaN ones in 60 s'
         stream.close()
         by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
         answered = [s for s in nan_seqs if s in by_seq]
@@ -156,11 +163,7 @@ def test_nan_measurement_predict_only_counted_and_reported(ros_node):
             assert abs(e.position - 1e-3) < 1e-4
         assert wait_for(lambda: any(int(d.get('estimator_rejected_position', 0)) >= len(answered)
                                     for d in list(probe.diags)), 10), str(probe.diags[-1:])
-        # the good states after the NaN ones are updates again; a loaded machine may lose a
-        # stretch of estimates on their way to the probe (CI: all of seqs first+100..+199)
-        good = [e for s, e in by_seq.items() if first + 50 < s <= first + 300]
-        assert len(good) >= 20, f'{len(good)} estimates of the 250 good states after the NaN ones'
-        assert not any(e.update_skipped for e in good)
+        assert not any(e.update_skipped for e in good())
         d = probe.diags[-1]
         assert int(d['estimator_skipped_updates']) >= len(answered)
         assert int(d['rejected_states']) >= len(answered)
