@@ -17,7 +17,7 @@ from eha_ros.core.sim.batch import BatchStack, node_params
 from eha_ros.core.sim.closed_loop import R_FAULT, R_U, R_X, R_XHAT, R_XM
 from eha_ros.core.estimator import adapt, tuning
 from eha_ros.core.estimator import fault_detector as fd
-from eha_ros.core.estimator.params import without
+from eha_ros.core.estimator.params import DEFAULT_STAGES, without
 from eha_ros.core.estimator.chamber_kf import ChamberKF, continuous, leak_sensitivity
 from eha_ros.core.estimator.estimator import Estimator
 from eha_ros.core.hardware.sim_params import SCHEMA as SIM
@@ -235,7 +235,8 @@ def test_a_jump_needs_a_step_away_from_zero_and_still_pressures():
 
 def _suspects(innovations, pds, pz=None):
     """fault_detector.suspect after each sample of _jump_codes' detector (innovation sigma
-    30 um; pz: the pressures' normalised innovation, 0 unless given)."""
+    30 um; pz: the pressures' normalised innovation, 0 unless given). The estimator counts the
+    samples it holds back (FaultDetector.suspect_samples); the detector alone holds none."""
     det = fd.FaultDetector(1e-3, jump_debounce=3, jump_step=100e-6, jump_pressure_veto=8.0,
                            pd_per_m=2.0 * 1.379e9 * 2.572e-3 / 4.01e-4)
     det.start(0.0)
@@ -244,7 +245,8 @@ def _suspects(innovations, pds, pz=None):
     for k, (y, pd, z) in enumerate(zip(innovations, pds, pz)):
         det.update(1e-3 * k, y, 30e-6 ** 2, z, pd, 0.0)
         out.append(bool(fd.suspect(det.k, det.s)))
-    return out, det.suspect_samples
+    assert det.suspect_samples == 0
+    return out
 
 
 def test_a_run_is_suspect_only_out_of_quiet_innovations_and_until_the_debounce():
@@ -255,25 +257,25 @@ def test_a_run_is_suspect_only_out_of_quiet_innovations_and_until_the_debounce()
     after a load step whose position innovation stayed under the threshold while the
     pressures' went far beyond their veto (Table 4.5 plant 122)."""
     quiet = [10e-6, -15e-6] * (fd.QUIET_SAMPLES // 2)
-    flags, n = _suspects(quiet + [1e-3] * 5, [1e5] * (len(quiet) + 5))
-    assert flags[-5:] == [True, True, True, False, False] and n == 3
+    flags = _suspects(quiet + [1e-3] * 5, [1e5] * (len(quiet) + 5))
+    assert flags[-5:] == [True, True, True, False, False] and sum(flags) == 3
     # started too soon: the same jump 10 samples into the run
-    flags, n = _suspects(quiet[:10] + [1e-3] * 5, [1e5] * 15)
-    assert not any(flags) and n == 0
+    flags = _suspects(quiet[:10] + [1e-3] * 5, [1e5] * 15)
+    assert not any(flags)
     # the oil compressed on the first sample (p_D 50 bar up): vetoed, not suspect; a new step
     # away 2 samples after it is not suspect either
     pds = [1e5] * len(quiet) + [51e5] * 9
-    flags, n = _suspects(quiet + [-500e-6, -450e-6, -60e-6, -250e-6, -300e-6, -320e-6,
-                                  -310e-6, -300e-6, -290e-6], pds)
-    assert not any(flags) and n == 0
+    flags = _suspects(quiet + [-500e-6, -450e-6, -60e-6, -250e-6, -300e-6, -320e-6,
+                               -310e-6, -300e-6, -290e-6], pds)
+    assert not any(flags)
     # the load step's position innovation just under the threshold (7.7 sigma), its pressures'
     # at 80 sigma; the run 2 samples later: not suspect, and suspect without that pressure
     steps = quiet + [-230e-6, 130e-6, -260e-6, -300e-6, -300e-6]
     pz = [0.0] * len(quiet) + [80.0] + [0.0] * 4
-    flags, n = _suspects(steps, [51e5] * len(steps), pz)
-    assert not any(flags) and n == 0
-    flags, n = _suspects(steps, [51e5] * len(steps))
-    assert flags[-3:] == [True, True, True] and n == 3
+    flags = _suspects(steps, [51e5] * len(steps), pz)
+    assert not any(flags)
+    flags = _suspects(steps, [51e5] * len(steps))
+    assert flags[-3:] == [True, True, True] and sum(flags) == 3
 
 
 def test_one_valid_pressure_sensor_still_vetoes_a_jump():
@@ -830,6 +832,12 @@ def test_a_two_sample_glitch_is_not_followed_nor_a_fault(force):
     assert s.estimator.detector.suspect_samples == 2
     assert s.estimator.updates == n - 1 - 2        # the first sample starts it; 2 held back
     assert after < before + 20e-6
+    # with the isolate stage off the samples are taken: none held back, none counted
+    s = stack([1, 1, 1, 1, 1], seed=7, faults={2000: [('msp_bias', 0, 1e-3, 0.0)],
+                                               2002: [('msp_bias', 0, 0.0, 0.0)]},
+              est={'estimator.stages': [g for g in DEFAULT_STAGES if g != 'isolate']})
+    run(s, np.zeros(n), force * np.sin(2 * np.pi * t))
+    assert s.estimator.detector.suspect_samples == 0 and s.estimator.updates == n - 1
 
 
 def test_monitor_verdicts_hold_and_severity():

@@ -102,7 +102,7 @@ FS_P1, FS_PREF = 19, 21
 # the active motor's previous speed (NaN: none), the torque balance's p_D of the last sample
 # and of the one before the run
 FS_W1, FS_PV1, FS_PVREF = 23, 24, 25
-FS_SUSPECT = 26         # samples counted that were suspect (:func:`suspect`)
+FS_SUSPECT = 26         # samples the estimator held back as suspect (:func:`suspect`; isolate)
 # samples since the last loud one (before this one: the position's or a pressure's innovation
 # beyond its jump threshold or veto), and whether the current run began after QUIET_SAMPLES
 # of them (only such a run is suspect)
@@ -214,8 +214,6 @@ def detect(k, s, z, innovation, S, pz, pa, pb, w, i) -> int:
     s[FS_SINCE] = 0.0 if loud else min(s[FS_SINCE] + 1.0, QUIET_SAMPLES)
     if 0 < s[FS_NJUMP] <= VETO_SAMPLES and _compressed(k, s, pz, pa, pb, pv):
         s[FS_STEPPED] = 0.0
-    if suspect(k, s):
-        s[FS_SUSPECT] += 1
     s[FS_YPREV] = innovation
     if pa == pa and pb == pb:
         s[FS_PD1] = pa - pb
@@ -338,5 +336,6 @@ class FaultDetector:
 
     @property
     def suspect_samples(self) -> int:
-        """Samples so far that were a suspected jump's (:func:`suspect`), detected or not."""
+        """Samples so far that the estimator held back as a suspected jump's (:func:`suspect`,
+        counted by core.estimator.stepper.estimate; none with the isolate stage off)."""
         return int(self.s[FS_SUSPECT])

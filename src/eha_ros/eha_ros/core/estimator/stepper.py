@@ -453,6 +453,7 @@ def estimate(K, E, a, position, w, i, pa, pb):
         # unreported and the loop moved the piston by the bias
         x[:] = a.x_prior
         P[:] = a.P_prior
+        e.detector[fd.FS_SUSPECT] += 1
     else:
         e.updates += 1
         if k.chambers > 0.5:
