@@ -177,7 +177,9 @@ def test_nan_measurement_predict_only_counted_and_reported(ros_node):
 def test_a_two_sample_glitch_is_held_back_counted_and_logged(ros_node):
     """Two consecutive states read 1 mm off (a glitch of the position sensor): the estimator
     does not take them (a suspected jump, fault_detector.suspect), reports no fault, counts
-    them on /diagnostics (jump_suspect_samples) and logs them once."""
+    them on /diagnostics (jump_suspect_samples) and logs them once per diagnostics period that
+    had any. A loaded machine can lose every estimate near a glitch on its way to the probe
+    (CI lost 250 in a row once): then the glitch is repeated 400 ticks on, 3 glitches at most."""
     glitch = set()
 
     def fill(m):
@@ -185,22 +187,27 @@ def test_a_two_sample_glitch_is_held_back_counted_and_logged(ros_node):
             m.position += 1e-3
 
     with crafted(ros_node, '/est_glitch', fill) as (probe, stream, log):
-        first = stream.seq + 100
-        glitch.update((first, first + 1))
-        assert wait_for(lambda: any(e.seq > first + 300 for _, e in list(probe.estimates)), 30)
+        near, glitches = [], 0
+        while not near and glitches < 3:
+            first = stream.seq + 100
+            glitch.update((first, first + 1))
+            glitches += 1
+            assert wait_for(lambda: any(e.seq > first + 300 for _, e in list(probe.estimates)),
+                            30)
+            by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
+            near = [e for s, e in by_seq.items() if first <= s <= first + 50]
         stream.close()
-        by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
-        near = [e for s, e in by_seq.items() if first <= s <= first + 50]
-        assert near, 'no estimate around the glitch reached the probe'
+        assert near, f'no estimate around any of {glitches} glitches reached the probe'
         assert all(abs(e.position - 1e-3) < 50e-6 for e in near), \
             max(abs(e.position - 1e-3) for e in near)
         assert not any(e.sensor_fault for e in near)
         assert wait_for(lambda: any(int(d.get('jump_suspect_samples', 0)) > 0
                                     for d in list(probe.diags)), 10), str(probe.diags[-1:])
         d = probe.diags[-1]
-        assert 1 <= int(d['jump_suspect_samples']) <= 2, d
+        assert 1 <= int(d['jump_suspect_samples']) <= 2 * glitches, (d, glitches)
         assert int(d['detections_jump']) == 0 and d['consistency'] == 'ok', d
-    assert log['err'].count('held back as a suspected sensor jump') == 1, log['err']
+    assert 1 <= log['err'].count('held back as a suspected sensor jump') <= glitches, \
+        (log['err'], glitches)
 
 
 def test_blamed_pressure_sensors_position_only_from_then_on(ros_node):

@@ -107,6 +107,38 @@ def test_unwritable_output_is_one_line(tmp_path):
     assert lines[0].startswith('recorder: error: recorder.output =') and 'cannot write' in lines[0]
 
 
+
+def test_a_node_that_ends_itself_waits_until_a_stalled_recorder_has_its_samples(ros_node,
+                                                                                 tmp_path):
+    """nodes.common.delivered, what spin() does for a node that ended itself (sweep,
+    experiment) before it exits: a reliable writer delivers only while it lives, and an
+    experiment that exited at once lost its last 21 commands to a lagging recorder (CI of
+    stop 71). With the recorder stopped (SIGSTOP) the wait gives up after its timeout, with
+    False; resumed, every sample reaches the file."""
+    import signal
+
+    import eha_msgs.msg as M
+    from eha_ros.nodes.common import delivered, stream_qos
+    pub = ros_node.create_publisher(M.ActuatorCommand, '/eha/test/ended', stream_qos())
+    path = tmp_path / 'ended.mcap'
+    proc = start_process(recorder_cmd(path))
+    try:
+        assert wait_for(lambda: pub.get_subscription_count() > 0, 60), 'recorder did not match'
+        os.killpg(proc.pid, signal.SIGSTOP)
+        for k in range(N_STREAM):
+            pub.publish(M.ActuatorCommand(seq=k, motor_speed_ref=float(k)))
+        t0 = time.monotonic()
+        assert not delivered(ros_node, 0.5)
+        assert time.monotonic() - t0 < 5.0
+        os.killpg(proc.pid, signal.SIGCONT)
+        assert delivered(ros_node, 60.0)
+    finally:
+        os.killpg(proc.pid, signal.SIGCONT)
+        code, out, err = stop_process(proc, timeout=30)
+    assert code == 0, err[-2000:]
+    got = recording.columns(recording.read(str(path))['/eha/test/ended'], ['motor_speed_ref'])
+    assert list(got['seq']) == list(range(N_STREAM))
+
 # ---- lock-step determinism -------------------------------------------------------------------
 
 NODES = ['plant_sim', 'estimator', 'controller', 'switch_manager']

@@ -90,6 +90,31 @@ def run(name: str, schema: Schema, make_node: Callable, argv=None) -> int:
     return guarded(name, main)
 
 
+# how long a node that ended itself waits for its subscribers to acknowledge its last samples
+DELIVERY_TIMEOUT_S = 3.0      # under run_stack's 5 s silence limit (realtime)
+
+
+def delivered(node, timeout: float) -> bool:
+    """Wait, ``timeout`` s at most in all, until every matched reliable subscriber acknowledged
+    all that ``node`` published. A reliable writer delivers only while it lives: a tool node
+    that ends itself (sweep, experiment) and exits at once took its last ~20 samples with it
+    when a recorder lagged on a loaded machine. False (and one WARN line) if some were not."""
+    from rclpy.duration import Duration
+    end = time.monotonic() + timeout
+    late = []
+    for pub in list(node.publishers):
+        left = max(0.0, end - time.monotonic())
+        try:
+            if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                late.append(pub.topic_name)
+        except Exception as err:         # rclpy/rmw error: say so, do not hang the exit
+            late.append(f'{pub.topic_name} ({rcl_message(err)})')
+    if late:
+        node.get_logger().warning(f'not acknowledged by every subscriber within {timeout:g} s '
+                                  f'at exit: {", ".join(late)}')
+    return not late
+
+
 def spin(argv, make_nodes: Callable) -> int:
     """rclpy.init, build the nodes, spin them on one executor until Ctrl-C/SIGTERM or until a
     node ends itself (node.done); then close and destroy them. Returns the worst exit code."""
@@ -127,6 +152,9 @@ def spin(argv, make_nodes: Callable) -> int:
             close = getattr(node, 'close', None)
             if close:
                 close()
+        for node in nodes:
+            if getattr(node, 'done', False) and rclpy.ok():
+                delivered(node, DELIVERY_TIMEOUT_S)
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()

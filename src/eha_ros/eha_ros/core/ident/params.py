@@ -32,7 +32,9 @@ NODE = Schema('experiment', [
     Param(E + 'stroke_margin', 'float', 'm', 0.005, 0.0, 0.05,
           doc='plans, and the measured position (else the run stops), stay this far inside '
               'the end stops'),
-    Param(E + 'exit_when_done', 'bool', '', True, doc='the node exits when the plan is done'),
+    Param(E + 'exit_when_done', 'bool', '', True,
+          doc='the node exits when the plan is done (once every subscriber acknowledged its '
+          'last samples, 3 s at most)'),
     Param(E + 'diagnostics_period', 'float', 's', 1.0, 0.05, 60.0, doc='/diagnostics period'),
     Param(E + 'drive.freqs', 'float[]', 'Hz', [1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0], 0.01,
           1000.0, doc='speed-reference sweep of the velocity loop: speed sines, one after the '

@@ -54,7 +54,8 @@ NODE = Schema('sweep', [
     Param('sweep.controller_file', 'str', '', '',
           doc='controller YAML for the model overlay; empty = config/controller.yaml'),
     Param('sweep.exit_when_done', 'bool', '', True,
-          doc='the node exits when the sweep is finished'),
+          doc='the node exits when the sweep is finished (once every subscriber '
+          'acknowledged its last samples, 3 s at most)'),
 ])
 
 
