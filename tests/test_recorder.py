@@ -107,7 +107,6 @@ def test_unwritable_output_is_one_line(tmp_path):
     assert lines[0].startswith('recorder: error: recorder.output =') and 'cannot write' in lines[0]
 
 
-
 def test_a_node_that_ends_itself_waits_until_a_stalled_recorder_has_its_samples(ros_node,
                                                                                  tmp_path):
     """nodes.common.delivered, what spin() does for a node that ended itself (sweep,
@@ -138,6 +137,7 @@ def test_a_node_that_ends_itself_waits_until_a_stalled_recorder_has_its_samples(
     assert code == 0, err[-2000:]
     got = recording.columns(recording.read(str(path))['/eha/test/ended'], ['motor_speed_ref'])
     assert list(got['seq']) == list(range(N_STREAM))
+
 
 # ---- lock-step determinism -------------------------------------------------------------------
 
