@@ -205,16 +205,19 @@ PLC_STALL = 0.02     # [s] a gap in the PLC task's cycles longer than this: this
 
 def test_armed_speed_reaches_plc_then_watchdog_zeroes_it(probe, peer):
     """The PLC task runs in this test process: where the process stalls (CI, once: no PLC cycle
-    from 1 ms to 193 ms after the last command), its log cannot tell when the watchdog acted.
-    Such an attempt is measured again (at most three)."""
+    from 1 ms to 193 ms after the last command), its log cannot tell when the watchdog acted or
+    how long the stop held. Such an attempt is measured again (at most three)."""
     for attempt in (1, 2, 3):
         probe.hold(0.0, 0.2)
         res = probe.arm_fresh()
         assert res.success, res.message
         log = speeds_logged(peer, 0.3, lambda: probe.hold(100.0, 1.0))   # then commands stop
         t_last = probe.last_cmd_time
-        near = log[(log[:, 0] > t_last - 0.1) & (log[:, 0] < t_last + 0.25), 0]
-        stall = np.max(np.diff(near)) if len(near) > 1 else np.inf
+        # the window's ends count as cycles: a stall at its end (CI, once: no PLC cycle from
+        # 166 ms after the last command until the recording stopped) hides the final stop too
+        edges = (t_last - 0.1, t_last + 0.3)
+        near = log[(log[:, 0] > edges[0]) & (log[:, 0] < edges[1]), 0]
+        stall = np.max(np.diff(np.concatenate(([edges[0]], near, [edges[1]]))))
         if stall <= PLC_STALL:
             break
         print(f'attempt {attempt}: the PLC task stalled {1e3 * stall:.0f} ms near the last '
@@ -232,7 +235,8 @@ def test_armed_speed_reaches_plc_then_watchdog_zeroes_it(probe, peer):
     print(f'watchdog: zero speed at the PLC {1e3 * delay:.1f} ms after the last command '
           f'(command_timeout {1e3 * WATCHDOG:.0f} ms); last non-zero {1e3 * (last_moving - t_last):.1f}'
           f' ms; largest gap between test commands {1e3 * gap:.1f} ms')
-    assert final[-1, 0] - final[0, 0] > 0.2 and np.all(final[:, 1] == 0.0)
+    # zero from the watchdog (<= 80 ms) to the window's end (300 ms), no stall over 20 ms
+    assert final[-1, 0] - final[0, 0] > 0.15 and np.all(final[:, 1] == 0.0)
     assert delay <= WATCHDOG + 0.03                   # 30 ms slack for DDS + load
     assert last_moving - t_last >= WATCHDOG - 0.01    # held until the watchdog time, not earlier
     assert probe.wait_diag(lambda d: int(d.get('command_timeouts', 0)) >= 1 and
