@@ -55,6 +55,11 @@ class FakeEstimator(probes.Probe):
         self.thread.join()
 
 
+def answered(est, seq) -> bool:
+    """An answer to the estimate ``seq`` or a later one reached the fake estimator."""
+    return max((c.seq for c in est.commands[-200:]), default=0) >= seq
+
+
 @pytest.fixture
 def ctl(ros_node):
     proc = start_process(controller_cmd())
@@ -131,15 +136,21 @@ def test_watchdog_zero_speed_and_bumpless_recovery(ctl):
     ctl.position = 0.0
     time.sleep(0.5)
     ctl.paused = True                       # estimator dies
-    time.sleep(0.1)
-    zeros = ctl.commands[-20:]
-    assert all(c.motor_speed_ref == 0.0 for c in zeros)
+    # the watchdog's zero commands come instead of answers (seq 0: they answer no estimate;
+    # an answer at rest would read 0.0 too)
+    assert wait_for(lambda: len(ctl.commands) > 20 and all(
+        c.seq == 0 and c.motor_speed_ref == 0.0 for c in ctl.commands[-20:]), 10), \
+        [(c.seq, c.motor_speed_ref) for c in ctl.commands[-20:]]
     assert wait_for(lambda: ctl.diags and int(ctl.diags[-1].get('watchdog_trips', 0)) >= 1, 5)
     n = len(ctl.commands)
     ctl.position = 0.003                    # the piston drifted 3 mm meanwhile
     ctl.paused = False
-    assert wait_for(lambda: len(ctl.commands) > n + 30, 5)
-    after = np.array([c.motor_speed_ref for c in ctl.commands[n:n + 30]])
+
+    def answers():                          # without the watchdog's zeros before they stop
+        return [c.motor_speed_ref for c in ctl.commands[n:] if c.seq != 0]
+
+    assert wait_for(lambda: len(answers()) > 30, 10)
+    after = np.array(answers()[:30])
     # recovery starts at zero output (reference restarted at the piston) and ramps with the
     # rate-limited reference; restarting on the 3 mm error would jump to the 838 rad/s clamp
     assert abs(after[0]) < 50.0, after[:10]
@@ -162,18 +173,18 @@ def test_inactive_while_the_plant_side_is_and_bumpless_when_it_becomes_active(ct
     ctl.position = 0.0
     ctl.ref_pub.publish(ctl.Ref(position=0.005))
     first = ctl.seq
-    assert wait_for(lambda: ctl.seq > first + 1500, 10)
-    held = [c.motor_speed_ref for c in ctl.commands if c.seq > first + 5]
+    # the answers to estimates first+6..first+1500, once they came (windows by seq: a loaded
+    # machine delays them; a command with seq 0 is the watchdog's, no answer)
+    assert wait_for(lambda: answered(ctl, first + 1500), 30)
+    held = [c.motor_speed_ref for c in ctl.commands if first + 5 < c.seq <= first + 1500]
     assert len(held) > 1000 and all(u == 0.0 for u in held), max(map(abs, held))
     assert ctl.diags[-1]['active'] == 'False'
     n = len(ctl.commands)
     pub.publish(State(id=State.PRIMARY_STATE_ACTIVE, label='active'))
     assert wait_for(lambda: any(c.motor_speed_ref != 0.0 for c in ctl.commands[n:]), 10)
-    k = next(i for i in range(n, len(ctl.commands)) if ctl.commands[i].motor_speed_ref != 0.0)
-    assert wait_for(lambda: len(ctl.commands) > k + 300, 10)
-    # the answers to estimates: a command with seq 0 is the watchdog's (no fresh estimate
-    # for 5 ms: the fake estimator's thread stalled on CI's loaded machine), not one of them
-    after = np.array([c.motor_speed_ref for c in ctl.commands[k:k + 300] if c.seq != 0])
+    s1 = next(c.seq for c in ctl.commands[n:] if c.motor_speed_ref != 0.0)
+    assert wait_for(lambda: answered(ctl, s1 + 299), 30)
+    after = np.array([c.motor_speed_ref for c in ctl.commands if s1 <= c.seq < s1 + 300])
     # bumpless: the reference ramps from the piston at 190 mm/s, the output builds up from
     # near zero (a 5 mm error at once would be the clamp) and drives towards +5 mm
     assert len(after) > 250 and abs(after[0]) < 50.0 and after[-1] > 0.0, after[:10]
@@ -202,11 +213,12 @@ def test_managed_controller_change_state_inactive_active_bumpless(ros_node):
         return ok, call(get, GetState.Request()).current_state.label
 
     def outputs(ticks=600, since=None):
-        """Answers to the next ``ticks`` estimates (``since``: from this command on)."""
-        first = est.seq
-        n = len(est.commands) if since is None else since
-        assert wait_for(lambda: est.seq > first + ticks, 10)
-        return np.array([c.motor_speed_ref for c in est.commands[n:] if c.seq > 0])[3:]
+        """Answers to the next ``ticks`` estimates, by seq once they came (``since``: from
+        the estimate after this seq on)."""
+        last = est.seq + ticks
+        first = est.seq if since is None else since
+        assert wait_for(lambda: answered(est, last), 30)
+        return np.array([c.motor_speed_ref for c in est.commands if first < c.seq <= last])[3:]
 
     try:
         assert wait_for(lambda: len(est.commands) > 100, 60), 'controller does not answer'
@@ -216,13 +228,13 @@ def test_managed_controller_change_state_inactive_active_bumpless(ros_node):
         seen = {'unconfigured': outputs()}
         assert transition('configure') == (True, 'inactive')
         seen['inactive'] = outputs()
-        n = len(est.commands)
+        n = est.seq
         assert transition('activate') == (True, 'active')
         seen['active'] = outputs(since=n)
         assert transition('deactivate') == (True, 'inactive')
         seen['deactivated'] = outputs()
         est.position = 0.002                       # the piston moved meanwhile
-        n = len(est.commands)
+        n = est.seq
         assert transition('activate') == (True, 'active')
         seen['again'] = outputs(since=n)
         assert transition('configure') == (False, 'active')      # not from 'active'
@@ -242,10 +254,20 @@ def test_managed_controller_change_state_inactive_active_bumpless(ros_node):
 
 
 def test_stale_estimates_trip_watchdog(ctl):
-    time.sleep(0.3)
+    """Stale estimates (the estimator predicting without states) trip the watchdog: zero
+    speed from then on. The piston 2 mm short of its reference keeps the answers before
+    non-zero, so the zeros are the watchdog's."""
+    ctl.ref_pub.publish(ctl.Ref(position=0.002))
+    assert wait_for(lambda: len(ctl.commands) > 20 and all(
+        c.seq > 0 and c.motor_speed_ref > 10.0 for c in ctl.commands[-20:]), 10), \
+        [c.motor_speed_ref for c in ctl.commands[-20:]]
+    trips = int(ctl.diags[-1].get('watchdog_trips', 0)) if ctl.diags else 0
     ctl.stale = True
-    time.sleep(0.2)
-    assert all(c.motor_speed_ref == 0.0 for c in ctl.commands[-50:])
+    assert wait_for(lambda: ctl.diags and int(ctl.diags[-1].get('watchdog_trips', 0)) > trips,
+                    10)
+    n = len(ctl.commands) + 20              # answers still on their way when it was reported
+    assert wait_for(lambda: len(ctl.commands) > n + 50, 10)
+    assert all(c.motor_speed_ref == 0.0 for c in ctl.commands[n:])
     ctl.stale = False
 
 

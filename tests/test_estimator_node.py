@@ -4,6 +4,7 @@ bad parameters -> one line and exit 2."""
 import contextlib
 import math
 import os
+import re
 import subprocess
 import threading
 import time
@@ -141,22 +142,29 @@ def test_nan_measurement_predict_only_counted_and_reported(ros_node):
 
     # good states until the estimator answers (discovery), then NaN
     with crafted(ros_node, '/est_test', fill) as (probe, stream, log):
-        first = stream.seq + 100
-        nan_seqs.update(range(first, first + 5))
-        nan_seqs.add(first + 50)
+        answered, bursts = [], 0
         # the good states after the NaN ones are updates again. A loaded machine may lose a
         # stretch of estimates on their way to the probe (CI: first+100..+199 once, all 250 of
-        # first+51..+300 another time): the stream runs until 20 of them came, not a set time
-        def good():
-            return [e for _, e in list(probe.estimates) if e.seq > first + 50 and not e.stale]
+        # first+51..+300 another time): the stream runs until 20 of them came, not a set time,
+        # and a burst whose NaN states' estimates were lost is repeated (3 bursts at most)
+        while len(answered) < 4 and bursts < 3:
+            first = stream.seq + 100
+            burst = [*range(first, first + 5), first + 50]
+            nan_seqs.update(burst)
+            bursts += 1
 
-        assert wait_for(lambda: len(good()) >= 20, 60), \
-            f'{len(good())} fresh estimates of the good states after the NaN ones in 60 s'
+            def good():
+                return [e for _, e in list(probe.estimates)
+                        if e.seq > first + 50 and not e.stale]
+
+            assert wait_for(lambda: len(good()) >= 20, 60), \
+                f'{len(good())} fresh estimates of the good states after the NaN ones in 60 s'
+            by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
+            answered = [s for s in burst if s in by_seq]
         stream.close()
-        by_seq = {e.seq: e for _, e in list(probe.estimates) if not e.stale}
-        answered = [s for s in nan_seqs if s in by_seq]
         # on a heavily loaded machine the estimator may miss a state (then counted as lost)
-        assert len(answered) >= 4, f'estimates for only {len(answered)} of 6 NaN states'
+        assert len(answered) >= 4, \
+            f'estimates for only {len(answered)} of 6 NaN states, in each of {bursts} bursts'
         for s in answered:
             e = by_seq[s]
             assert e.update_skipped and math.isfinite(e.position)
@@ -206,8 +214,10 @@ def test_a_two_sample_glitch_is_held_back_counted_and_logged(ros_node):
         d = probe.diags[-1]
         assert 1 <= int(d['jump_suspect_samples']) <= 2 * glitches, (d, glitches)
         assert int(d['detections_jump']) == 0 and d['consistency'] == 'ok', d
-    assert 1 <= log['err'].count('held back as a suspected sensor jump') <= glitches, \
-        (log['err'], glitches)
+    # one line per diagnostics period that had any: a glitch across a period's end gives two
+    lines = [int(n) for n in re.findall(r'(\d+) position samples held back as a suspected '
+                                        r'sensor jump', log['err'])]
+    assert 1 <= len(lines) <= 2 * glitches and sum(lines) <= 2 * glitches, (log['err'], glitches)
 
 
 def test_blamed_pressure_sensors_position_only_from_then_on(ros_node):

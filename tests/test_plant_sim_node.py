@@ -293,13 +293,17 @@ def test_each_fault_visible_in_state(probe):
     assert abs(np.median(probe.sensor_error(k + 100, k + 300)) - before - 1e-3) < 1e-4
     assert abs(np.median(probe.sensor_error(k + 600, k + 700)) - before) < 1e-4
     # msp_stuck: measured position frozen while the piston moves
-    k = fault_tick(probe.fault('msp_stuck', duration=0.4))
+    # (the holds, 0.6 s of plant time, start once the reply reached this process; a 1 mm move
+    # takes 26 ms at 150 rad/s: the window sees one unless the reply took over 0.6 s)
+    k = fault_tick(probe.fault('msp_stuck', duration=0.8))
     probe.hold(150.0, 0.3)
-    stuck = [s.position for s in probe.window(k + 50, k + 250)]
-    moved = [t.position for t in probe.truths if k + 50 <= t.seq < k + 250]
-    assert np.ptp(stuck) < 1e-9 and np.ptp(moved) > 1e-3
     probe.hold(-150.0, 0.3)
+    stuck = [s.position for s in probe.window(k + 50, k + 750)]
+    probe.wait(lambda: probe.truths[-1].seq >= k + 749, 10, f'no truth of tick {k + 749}')
+    moved = [t.position for t in probe.truths if k + 50 <= t.seq < k + 750]
+    assert np.ptp(stuck) < 1e-9 and np.ptp(moved) > 1e-3
     probe.hold(0.0, 0.3)
+    probe.wait(lambda: probe.seq >= k + 1050, 20, 'plant stalled')   # unstuck 250 ticks ago
     # msp_noise: the sensor error's scatter grows by the injected sigma
     k = fault_tick(probe.fault('msp_noise', magnitude=5e-4, duration=0.5))
     quiet = np.std(probe.sensor_error(k - 200, k))

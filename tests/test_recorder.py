@@ -69,6 +69,7 @@ def test_peer_messages_read_back_equal(ros_node, tmp_path):
         assert wait_for(lambda: late.get_subscription_count() > 0, 60), 'late topic not found'
         late_msg = fill(M.ExternalLoad(), salt=3)
         late.publish(late_msg)
+        assert late.wait_for_all_acked(Duration(seconds=30))
         time.sleep(0.2)
     finally:
         code, out, err = stop_process(proc, timeout=30)      # SIGINT, like Ctrl-C
