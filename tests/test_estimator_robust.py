@@ -14,7 +14,8 @@ import pytest
 from scipy.linalg import expm
 
 from eha_ros.core.sim.batch import BatchStack, node_params
-from eha_ros.core.sim.closed_loop import R_FAULT, R_U, R_X, R_XHAT, R_XM
+from eha_ros.core.sim.closed_loop import (R_FAULT, R_NISDIM, R_SKIP, R_U, R_X, R_XHAT,
+                                          R_XM)
 from eha_ros.core.estimator import adapt, tuning
 from eha_ros.core.estimator import fault_detector as fd
 from eha_ros.core.estimator.params import DEFAULT_STAGES, without
@@ -831,6 +832,10 @@ def test_a_two_sample_glitch_is_not_followed_nor_a_fault(force):
     assert not rec[:, R_FAULT].any() and s.estimator.consistency == adapt.OK
     assert s.estimator.detector.suspect_samples == 2
     assert s.estimator.updates == n - 1 - 2        # the first sample starts it; 2 held back
+    # published as predict only: no update behind them (nis_dim 0, update_skipped), on the
+    # records whose measured position carries the bias (2001-2002) and no other
+    assert list(np.nonzero(rec[1:, R_NISDIM] == 0)[0] + 1) == [2001, 2002]
+    assert list(np.nonzero(rec[:, R_SKIP])[0]) == [2001, 2002]
     assert after < before + 20e-6
     # with the isolate stage off the samples are taken: none held back, none counted
     s = stack([1, 1, 1, 1, 1], seed=7, faults={2000: [('msp_bias', 0, 1e-3, 0.0)],

@@ -4,8 +4,8 @@ Per tick: validate the measurement (finite, position within stroke +- margin, pr
 the sensor range, motor speed in range), predict one Ts with the active channel's motor speed
 (eq. 4.1-4.2; mean of the previous and current sample held over the period), update with the
 valid measurements (eq. 4.4-4.6, Joseph form), run the fault detector on the innovation.
-A rejected position means predict only (``update_skipped``); rejected pressures fall back to
-a position-only update; a rejected motor speed holds the last good one. Each rejection is
+A rejected position means predict only (``update_skipped``), and so does one held back as a
+suspected jump's (the isolate stage); rejected pressures fall back to a position-only update; a rejected motor speed holds the last good one. Each rejection is
 counted in ``counters`` by reason.
 """
 from __future__ import annotations
@@ -322,9 +322,11 @@ class Estimator:
                 i = float(motor_current[int(active_channel)])
             _, y, nis, m, _ = self._estimate(*self.kernel, position, w, i, pressure_a,
                                              pressure_b)
+            if m == 0:                  # held back as a suspected jump's: predict only
+                self.counters.bump('skipped_updates')
             if self.chinniah is not None and pr_ok:
                 self.chinniah.step(position, self.kf.velocity, self.pd_meas)
-            return self._result(y, nis, False, ','.join(reasons), m)
+            return self._result(y, nis, m == 0, ','.join(reasons), m)
         self._advance(*self.kernel, w, pressure_a, pressure_b)
         noise_level.gap(self.noise_s)
         self.counters.bump('skipped_updates')

@@ -413,7 +413,7 @@ def estimate(K, E, a, position, w, i, pa, pb):
     detector's torque balance, NaN with a held speed or none; invalid pressures are left
     out): :func:`advance`, the update with position (and pressures), the adaptive parts, the
     fault detector and :func:`consistency`. Returns (position, innovation, nis, nis_dim,
-    code)."""
+    code); nis_dim 0 when the update was held back (a suspected jump's sample)."""
     k, e = K[0], E[0]
     pr_ok = advance(K, E, a, w, pa, pb)
     x, P, Q, H, R, y, S, H1, R1, y1, S1, zm, z1, ws = (a.x, a.P, a.Q, a.H, a.R, a.y, a.S, a.H1,
@@ -454,6 +454,7 @@ def estimate(K, E, a, position, w, i, pa, pb):
         x[:] = a.x_prior
         P[:] = a.P_prior
         e.detector[fd.FS_SUSPECT] += 1
+        m = 0                  # no update: nis_dim 0, published with update_skipped
     else:
         e.updates += 1
         if k.chambers > 0.5:

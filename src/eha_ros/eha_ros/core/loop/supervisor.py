@@ -108,17 +108,18 @@ class LoopSupervisor:
 
     def estimate(self, seq: int, rejected: bool, stale: bool, now: float):
         """``rejected``: made without the position measurement, which the estimator refused
-        (not one it isolated after its own sensor-fault verdict: core.loop.safe_state acts on
-        that)."""
+        or held back as a suspected jump's (not one it isolated after its own sensor-fault
+        verdict: core.loop.safe_state acts on that)."""
         self._progress('estimate', seq, now)
         if stale:                            # no state: the stall check's business
             return
         self.rejected_run = self.rejected_run + 1 if rejected else 0
         self.max_rejected_run = max(self.max_rejected_run, self.rejected_run)
         if self.rejected_run >= self.reject_n:
-            self._trip(REJECTED, f'the estimator has rejected every position measurement for '
+            self._trip(REJECTED, f'the estimator has taken no position measurement for '
                                  f'{self.rejected_run * self.p.Ts * 1e3:.0f} ms (out of '
-                                 f'range or non-finite), no sensor-fault verdict', now, seq)
+                                 f'range, non-finite or held back as a suspected jump), no '
+                                 f'sensor-fault verdict', now, seq)
 
     def command(self, seq: int, speed: float, now: float):
         self._progress('command', seq, now)

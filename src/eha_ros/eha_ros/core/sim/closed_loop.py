@@ -202,6 +202,6 @@ def segment(k0, k1, off, Ts, refs, loads, plant, nsub, est, has_est, ctl, mgr, h
         u = un
         record(rec[k - off], plant, x0, v0, gm0, pos, w_meas, i_meas, pa, pb, ch, x_hat,
                x[1] if has_est else math.nan, un, nis, innov, code, nd,
-               ee[0].monitor[EA.MS_VERDICT] if has_est else 0, 0,
+               ee[0].monitor[EA.MS_VERDICT] if has_est else 0, 1 if has_est and nd == 0 else 0,
                g[RS.G_ACTIVE] if has_mgr else ch, state_code(g) if has_mgr else ch)
     return k1, END, u
