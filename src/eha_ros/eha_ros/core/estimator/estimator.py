@@ -5,8 +5,9 @@ the sensor range, motor speed in range), predict one Ts with the active channel'
 (eq. 4.1-4.2; mean of the previous and current sample held over the period), update with the
 valid measurements (eq. 4.4-4.6, Joseph form), run the fault detector on the innovation.
 A rejected position means predict only (``update_skipped``), and so does one held back as a
-suspected jump's (the isolate stage); rejected pressures fall back to a position-only update; a rejected motor speed holds the last good one. Each rejection is
-counted in ``counters`` by reason.
+suspected jump's (the isolate stage); rejected pressures fall back to a position-only update;
+a rejected motor speed holds the last good one. Each rejection is counted in ``counters`` by
+reason.
 """
 from __future__ import annotations
 
