@@ -4,9 +4,9 @@ Subscribes eha/state, publishes one eha/estimate per state with the same seq and
 (position, velocity, p_D, variance, innovation, NIS, sensor fault). The filter uses the active
 channel's motor speed. A NaN or out-of-range measurement gives a predict-only estimate with
 update_skipped = true, and so does a sample held back as a suspected sensor jump's; each is
-counted and reported on /diagnostics. A 1 ms timer watches the
-stream: no state for more than estimator.node.stale_time (5 ms) -> predict-only estimates
-marked stale = true, one per timer tick, with the seq the missing states would have had.
+counted and reported on /diagnostics. A 1 ms timer watches the stream: no state for more
+than estimator.node.stale_time (5 ms) -> predict-only estimates marked stale = true, one per
+timer tick, with the seq the missing states would have had.
 Subscribes eha/redundancy: once the switch manager blames the chamber pressure sensors
 (pressure_sensors_failed) the filter updates on the position alone from then on.
 """
