@@ -217,10 +217,14 @@ def test_a_two_sample_glitch_is_held_back_counted_and_logged(ros_node):
         d = probe.diags[-1]
         assert 1 <= int(d['jump_suspect_samples']) <= 2 * glitches, (d, glitches)
         assert int(d['detections_jump']) == 0 and d['consistency'] == 'ok', d
-    # one line per diagnostics period that had any: a glitch across a period's end gives two
-    lines = [int(n) for n in re.findall(r'(\d+) position samples held back as a suspected '
-                                        r'sensor jump', log['err'])]
-    assert 1 <= len(lines) <= 2 * glitches and sum(lines) <= 2 * glitches, (log['err'], glitches)
+    # one line per diagnostics period that had any: a glitch across a period's end gives two;
+    # each line's count is what the period added to the total it names
+    lines = [(int(n), int(total)) for n, total in re.findall(
+        r'(\d+) position samples held back as a suspected sensor jump \(jump_suspect_samples '
+        r'(\d+)\)', log['err'])]
+    added = [n for n, _ in lines]
+    assert 1 <= len(lines) <= 2 * glitches and sum(added) <= 2 * glitches, (log['err'], glitches)
+    assert [total for _, total in lines] == list(np.cumsum(added)), lines
 
 
 def test_blamed_pressure_sensors_position_only_from_then_on(ros_node):
