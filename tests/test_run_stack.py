@@ -328,9 +328,16 @@ def test_killed_recorder_leaves_a_finished_file_from_the_first_tick(tmp_path, ro
     st = Started(tmp_path, 'rec', '--duration', '300', '--record')
     try:
         assert st.running(), st.lines
-        time.sleep(4.0)
-        on_graph = {t: {i.node_name for i in ros_node.get_subscriptions_info_by_topic(t)}
+        t0 = time.monotonic()
+
+        def graph():
+            return {t: {i.node_name for i in ros_node.get_subscriptions_info_by_topic(t)}
                     for t in ('/eha/state', '/eha/estimate', '/eha/command', '/diagnostics')}
+        # the recorder's /diagnostics subscription discovered here (a loaded machine takes
+        # seconds), and 4 s of recording at least
+        assert wait_for(lambda: 'recorder' in graph()['/diagnostics'], 60), graph()
+        time.sleep(max(0.0, 4.0 - (time.monotonic() - t0)))
+        on_graph = graph()
         pid = _child(st, 'eha_loop')
         assert pid, st.lines
         os.kill(pid, signal.SIGKILL)
