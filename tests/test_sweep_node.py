@@ -127,34 +127,6 @@ def test_bad_sweep_parameter_stops_node_with_one_line():
     assert len(lines) == 1 and 'beyond the stroke' in lines[0], res.stderr
 
 
-def test_plan_starts_after_every_tick_already_seen(rclpy_session, tmp_path):
-    """A state handled after the estimates, commands and truth of later ticks (its queue behind
-    theirs) starts the plan after the newest of them, so no tick of the plan lost a stream
-    before the start (CI once lost the first 610 ticks of estimate, command and truth: the 1 Hz
-    point had no data)."""
-    from eha_msgs.msg import ActuatorCommand, ActuatorState, PlantTruth, PositionEstimate
-    from eha_ros.core.sim.batch import node_params
-    from eha_ros.core.sweep.params import SCHEMA
-    from eha_ros.nodes import sweep
-    p = dict(node_params('sweep', SCHEMA), **{'sweep.start_delay': 0.0,
-                                               'sweep.out_dir': str(tmp_path)})
-    node = sweep.make_node(p)
-    try:
-        for k in range(100, 701):              # estimate, command, truth up to tick 700 ...
-            node.on_command(ActuatorCommand(seq=k))
-            node.on_estimate(PositionEstimate(seq=k, position=1e-6 * k))
-            node.on_truth(PlantTruth(seq=k, position=1e-6 * k))
-        node.on_state(ActuatorState(seq=100))  # ... before state 100
-        lead = p['sweep.lead_ticks']
-        assert node.session.seq0 == 700 + lead
-        for k in range(701, 800):
-            node.on_estimate(PositionEstimate(seq=k, position=1e-6 * k))
-        est = node.session.data['estimate'][:800 - 700 - lead]
-        assert np.isfinite(est).all()         # every tick of the plan so far has its estimate
-    finally:
-        node.destroy_node()
-
-
 def sweep_in_process(tmp_path, **params):
     """The sweep node in this process, fed by calling its callbacks (no DDS timing)."""
     from eha_ros.core.sim.batch import node_params
@@ -163,6 +135,29 @@ def sweep_in_process(tmp_path, **params):
     p = dict(node_params('sweep', SCHEMA), **{'sweep.start_delay': 0.0,
                                                'sweep.out_dir': str(tmp_path), **params})
     return sweep.make_node(p)
+
+
+def test_plan_starts_after_every_tick_already_seen(rclpy_session, tmp_path):
+    """A state handled after the estimates, commands and truth of later ticks (its queue behind
+    theirs) starts the plan after the newest of them, so no tick of the plan lost a stream
+    before the start (CI once lost the first 610 ticks of estimate, command and truth: the 1 Hz
+    point had no data)."""
+    from eha_msgs.msg import ActuatorCommand, ActuatorState, PlantTruth, PositionEstimate
+    node = sweep_in_process(tmp_path)
+    try:
+        for k in range(100, 701):              # estimate, command, truth up to tick 700 ...
+            node.on_command(ActuatorCommand(seq=k))
+            node.on_estimate(PositionEstimate(seq=k, position=1e-6 * k))
+            node.on_truth(PlantTruth(seq=k, position=1e-6 * k))
+        node.on_state(ActuatorState(seq=100))  # ... before state 100
+        lead = node.lead
+        assert node.session.seq0 == 700 + lead
+        for k in range(701, 800):
+            node.on_estimate(PositionEstimate(seq=k, position=1e-6 * k))
+        est = node.session.data['estimate'][:800 - 700 - lead]
+        assert np.isfinite(est).all()         # every tick of the plan so far has its estimate
+    finally:
+        node.destroy_node()
 
 
 def feed_tick(node, k, estimate=True):

@@ -178,7 +178,7 @@ class Sweep:
         done = self.complete_through(k)
         for point in s.progress(done):
             self.get_logger().info(s.describe(point))
-        if not self.done and not s.finished and k - s.seq0 >= s.n_run + MARGIN_TICKS:
+        if not s.finished and k - s.seq0 >= s.n_run + MARGIN_TICKS:
             self.end_by = self.end_by or time.monotonic() + STREAM_WAIT_S
             if done - s.seq0 >= s.n_run or time.monotonic() >= self.end_by:
                 self.warn_lagging(s.seq0 + s.n_run - 1)
