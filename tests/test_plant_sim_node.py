@@ -58,13 +58,63 @@ class Probe(probes.Probe):
         target = self.seq + n
         self.wait(lambda: self.seq >= target, timeout, f'plant stalled before {target}')
 
-    def hold(self, speed, seconds):
-        """Command a speed every ~2 ms (as a controller would) for ``seconds`` of plant time."""
+    def hold(self, speed, seconds, between=None):
+        """Command a speed every ~2 ms (as a controller would) for ``seconds`` of plant time,
+        each command followed by one of speed ``between`` if given."""
         target = self.seq + int(seconds * 1000)
         end = time.monotonic() + 20 + 3 * seconds
         while self.seq < target and time.monotonic() < end:
             self.command(speed)
+            if between is not None:
+                self.command(between)
             time.sleep(0.002)
+
+    def hold_unbroken(self, speed, settle, seconds, attempts=3, between=None):
+        """Hold ``speed`` (couple 0) for ``settle`` then ``seconds`` of plant time; the plant
+        ticks (k0, k1) of the second part, on which the true motor speed stayed within 10 % of
+        ``speed``. Commands go from this process: where it stalls, or the plant's executor does,
+        beyond the plant's 50 ms command_timeout, the plant rightly stops the motor (CI, once:
+        the median piston velocity of the window 7 um/s), so the hold is made again
+        (``attempts`` at most). Each attempt starts at mid-stroke, so none ends on a stop."""
+        for attempt in range(1, attempts + 1):
+            self.center()
+            self.hold(speed, settle, between)
+            n, k0 = len(self.sent), self.seq
+            self.hold(speed, seconds, between)
+            k1 = self.seq
+            gap = np.max(np.diff(self.sent[n - 1:]))     # from the last command before k0
+            w = self.truth_window(k0, k1)
+            off = np.abs(np.array([t.motor_speed[0] for t in w]) - speed)   # NaN: not held
+            held = len(w) > 0.8 * (k1 - k0) and np.max(off) <= 0.1 * abs(speed)
+            if held:
+                return k0, k1
+            what = (f'the motor {np.max(off):.1f} rad/s off {speed} rad/s (longest pause '
+                    f'between commands sent {1e3 * gap:.0f} ms)')
+            print(f'attempt {attempt}: {what}; held again')
+        pytest.fail(f'in each of {attempts} attempts, the last: {what}')
+
+    def center(self, gain=2e4, timeout=20.0):
+        """Bring the piston to mid-stroke (measured |x| < 2 mm): a speed command proportional
+        to the measured position, ``gain`` [rad/s per m] (2e4: a 0.19 s time constant),
+        within +-100 rad/s."""
+        end = time.monotonic() + timeout
+        while abs(self.states[-1].position) >= 2e-3:
+            assert time.monotonic() < end, f'piston not at mid-stroke: {self.states[-1].position}'
+            self.command(float(np.clip(-gain * self.states[-1].position, -100.0, 100.0)))
+            time.sleep(0.002)
+
+    def truth_window(self, k0, k1):
+        """Truths with k0 <= seq < k1, waiting for the truth of tick k1 - 1."""
+        self.wait(lambda: self.truths and self.truths[-1].seq >= k1 - 1, 10,
+                  f'no truth of tick {k1 - 1}')
+        return [t for t in self.truths[-(self.truths[-1].seq - k0) - 100:] if k0 <= t.seq < k1]
+
+    def rate(self, k0, k1):
+        """The piston's rate [m/s] over ticks k0 <= seq < k1: the slope of the measured
+        position against plant time."""
+        s = self.window(k0, k1)
+        assert len(s) > 0.8 * (k1 - k0), 'states of the window missing'
+        return np.polyfit([1e-3 * m.seq for m in s], [m.position for m in s], 1)[0]
 
     def fault(self, name, channel=0, magnitude=0.0, duration=0.0):
         from eha_msgs.srv import InjectFault
@@ -239,46 +289,23 @@ def test_plant_state_is_active_for_a_late_subscriber(probe, ros_node):
     assert [(m.id, m.label) for m in got] == [(State.PRIMARY_STATE_ACTIVE, 'active')]
 
 
-COMMAND_GAP = 0.03     # [s] commands further apart than this: the test process stalled
-
-
 def test_command_applied_gives_piston_speed_d_over_a(probe):
     """The truths of ticks held at 100 rad/s, chosen by seq: on a loaded machine the truth
     stream's arrivals lag the states (CI: the 200 truths after a clear() were mostly of the
-    later 0 rad/s hold). Commands are sent from this process: where it stalls beyond the
-    plant's command_timeout (50 ms) the plant rightly stops the motor (CI, once: the median
-    velocity of the window 7 um/s), so such an attempt is measured again (at most three)."""
-    for attempt in (1, 2, 3):
-        probe.hold(100.0, 0.6)        # 100 rad/s -> 100 * D_p/A_p = 26 mm/s
-        k0 = probe.seq + 50
-        n = len(probe.sent)
-        probe.hold(100.0, 0.3)
-        k1 = probe.seq
-        gap = np.max(np.diff(probe.sent[n - 1:]))     # from the last command before k0
-        if gap <= COMMAND_GAP:
-            break
-        print(f'attempt {attempt}: no command sent for {1e3 * gap:.0f} ms; measured again')
+    later 0 rad/s hold)."""
+    k0, k1 = probe.hold_unbroken(100.0, 0.65, 0.25)   # 100 rad/s -> 100 * D_p/A_p = 26 mm/s
     probe.hold(0.0, 0.4)
-    assert gap <= COMMAND_GAP, f'this process stalled in all three attempts ({gap:.3f} s)'
-    probe.wait(lambda: probe.truths and probe.truths[-1].seq >= k1, 10, f'no truth of tick {k1}')
-    vel = np.array([t.velocity for t in probe.truths if k0 <= t.seq < k1])
-    assert vel.size > 100
+    vel = np.array([t.velocity for t in probe.truth_window(k0, k1)])
+    assert vel.size > 200
     assert math.isclose(np.median(vel), 100.0 * D_P / A_P, rel_tol=0.05), np.median(vel)
 
 
 def test_nan_command_rejected_last_good_held_and_reported(probe):
-    probe.hold(50.0, 0.5)
-    n0 = len(probe.truths)
-    # NaN between good commands (each NaN, if applied, would reach the state at once); no wall
-    # time rides on it: a starved test thread lets the commands go stale, a NaN does not count;
-    # the counter sees what arrived (a keep-last queue may drop some of 100 under load)
-    for _ in range(100):
-        probe.command(50.0)
-        probe.command(float('nan'))
-        time.sleep(0.002)
-    probe.wait_ticks(30)
-    vel = np.array([t.velocity for t in probe.truths[n0:]])
-    assert vel.size > 30 and np.all(np.isfinite(vel))
+    # NaN after each good command (each NaN, if applied, would reach the state at once); the
+    # counter sees what arrived (a keep-last queue may drop some of them under load)
+    k0, k1 = probe.hold_unbroken(50.0, 0.3, 0.2, between=float('nan'))
+    vel = np.array([t.velocity for t in probe.truth_window(k0, k1)])
+    assert vel.size > 150 and np.all(np.isfinite(vel))
     assert np.median(vel) > 0.5 * 50 * D_P / A_P
     probe.hold(0.0, 0.3)
     assert wait_for(lambda: probe.diags
@@ -339,14 +366,13 @@ def test_each_fault_visible_in_state(probe):
     assert abs(pb1 - pb0 + 30e5) < 3e5 and abs(pa1 - pa0) < 3e5
     probe.wait_ticks(400)
     # pump_leakage under load: the commanded speed moves the piston much less
+    # (each rate over 0.2 s of unbroken commands: a motor stopped by stale commands would
+    # look like a leak)
     probe.load_pub.publish(probe.Load(force=10e3))
-    probe.hold(100.0, 0.3)
-    x = [s.position for s in probe.recent(0.2)]
-    healthy_rate = (x[-1] - x[0]) / 0.2
-    fault_tick(probe.fault('pump_leakage', channel=0, magnitude=30.0, duration=1.0))
-    probe.hold(100.0, 0.3)
-    x = [s.position for s in probe.recent(0.2)]
-    leaky_rate = (x[-1] - x[0]) / 0.2
+    healthy_rate = probe.rate(*probe.hold_unbroken(100.0, 0.25, 0.2))
+    fault_tick(probe.fault('pump_leakage', channel=0, magnitude=30.0))      # until cleared
+    leaky_rate = probe.rate(*probe.hold_unbroken(100.0, 0.25, 0.2))
+    assert probe.fault('clear').success
     assert leaky_rate < 0.7 * healthy_rate, (healthy_rate, leaky_rate)
     probe.load_pub.publish(probe.Load(force=0.0))
     probe.hold(0.0, 0.8)
