@@ -15,6 +15,11 @@ pytestmark = pytest.mark.ros
 D_P, A_P = 6.684e-7, 2.572e-3
 
 
+def between(msgs, k0, k1):
+    """The messages with k0 <= seq < k1 among the newest of ``msgs`` (one a plant tick)."""
+    return [m for m in msgs[-(msgs[-1].seq - k0) - 100:] if k0 <= m.seq < k1]
+
+
 def plant_cmd(*extra):
     return node_command('plant_sim', extra=extra)
 
@@ -107,7 +112,7 @@ class Probe(probes.Probe):
         """Truths with k0 <= seq < k1, waiting for the truth of tick k1 - 1."""
         self.wait(lambda: self.truths and self.truths[-1].seq >= k1 - 1, 10,
                   f'no truth of tick {k1 - 1}')
-        return [t for t in self.truths[-(self.truths[-1].seq - k0) - 100:] if k0 <= t.seq < k1]
+        return between(self.truths, k0, k1)
 
     def rate(self, k0, k1):
         """The piston's rate [m/s] over ticks k0 <= seq < k1: the slope of the measured
@@ -125,13 +130,12 @@ class Probe(probes.Probe):
     def window(self, k0, k1, timeout=20.0):
         """States with k0 <= seq < k1 (plant ticks), waiting until they have arrived."""
         self.wait(lambda: self.seq >= k1, timeout, f'plant stalled before {k1}')
-        return [s for s in self.states[-(self.seq - k0) - 100:] if k0 <= s.seq < k1]
+        return between(self.states, k0, k1)
 
     def sensor_error(self, k0, k1):
         """Measured minus true position for ticks k0 <= seq < k1 (matched by seq)."""
         states = self.window(k0, k1)
-        self.wait(lambda: self.truths and self.truths[-1].seq >= k1 - 1, 10)
-        truth = {t.seq: t.position for t in self.truths[-(self.truths[-1].seq - k0) - 100:]}
+        truth = {t.seq: t.position for t in self.truth_window(k0, k1)}
         err = np.array([s.position - truth[s.seq] for s in states if s.seq in truth])
         assert err.size > 0.8 * (k1 - k0), 'states and truth do not match up'
         return err
@@ -340,8 +344,7 @@ def test_each_fault_visible_in_state(probe):
     probe.hold(150.0, 0.3)
     probe.hold(-150.0, 0.3)
     stuck = [s.position for s in probe.window(k + 50, k + 750)]
-    probe.wait(lambda: probe.truths[-1].seq >= k + 749, 10, f'no truth of tick {k + 749}')
-    moved = [t.position for t in probe.truths if k + 50 <= t.seq < k + 750]
+    moved = [t.position for t in probe.truth_window(k + 50, k + 750)]
     assert np.ptp(stuck) < 1e-9 and np.ptp(moved) > 1e-3
     probe.hold(0.0, 0.3)
     probe.wait(lambda: probe.seq >= k + 1050, 20, 'plant stalled')   # unstuck 250 ticks ago
