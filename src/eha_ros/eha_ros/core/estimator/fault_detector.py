@@ -172,11 +172,13 @@ def suspect(k, s) -> bool:
 
 
 @njit(cache=True)
-def detect(k, s, z, innovation, S, pz, pa, pb, w, i) -> int:
+def detect(k, s, z, innovation, S, pz, pa, pb, w, i, displacement) -> int:
     """One position sample z (m) with its innovation (m) and innovation variance S (m^2); pz:
     the largest normalised pressure innovation of the same update (0: none); pa, pb: the
     measured chamber pressures of the sample (Pa; NaN: that reading not valid); w, i: the
-    active motor's measured speed (rad/s) and current (A) (NaN: not valid). Returns the code.
+    active motor's measured speed (rad/s) and current (A) (NaN: not valid); displacement: the
+    pump's displacement over its nominal FK_TB_DP as the estimator has learned it (1 + delta,
+    :mod:`.adapt`; 1 without that state). Returns the code.
 
     r = innovation / sqrt(S)
     jump:  |r| > FK_JUMP for FK_JUMP_N samples, the run began with an innovation step
@@ -186,17 +188,18 @@ def detect(k, s, z, innovation, S, pz, pa, pb, w, i) -> int:
            c = COMPRESSION_SHARE FK_PD_PER_M step (pd = pa - pb); with one valid reading,
            its change from its last valid value before the run below c / 2 (one chamber's
            share of the compression); with either reading not valid, also the torque
-           balance's p_D, pv = (k_T i - b_eq w - J_eq dw/dt) / D_p (eq. 3.17: the pump's
-           torque on the shaft), moved by less than c (not c / 2: the drive's current
-           ripples by several A from one tick to the next)
+           balance's p_D, pv = (k_T i - b_eq w - J_eq dw/dt) / (D_p displacement) (eq. 3.17:
+           the pump's torque on the shaft), moved by less than c (not c / 2: the drive's
+           current ripples by several A from one tick to the next)
     stuck: z equal to the previous z for FK_STUCK_N samples
     drift: g+ = max(0, g+ + r - FK_DRIFT_K), g- = max(0, g- - r - FK_DRIFT_K) above FK_DRIFT_H
            for FK_DRIFT_N samples"""
     r = innovation / math.sqrt(S) if S > 0.0 else 0.0
     # the pump's pressure difference from the shaft's torque balance (NaN without a valid speed
-    # now and one sample before, or a current)
+    # now and one sample before, or a current), through the displacement the estimator learned:
+    # with the nominal one a D_p x0.8 pump's load step read 20 % short and was taken for a jump
     pv = shaft_pressure(i, w, (w - s[FS_W1]) / k[FK_TS], k[FK_TB_KT], k[FK_TB_B], k[FK_TB_J],
-                        k[FK_TB_DP])
+                        k[FK_TB_DP] * displacement)
     s[FS_NJUMP] = s[FS_NJUMP] + 1 if abs(r) > k[FK_JUMP] else 0
     # a jump starts with a one-sample innovation step, and the pressures stay quiet on it and
     # the next sample (a load step's pressure innovation can come a sample late)
@@ -288,7 +291,7 @@ class FaultDetector:
         self.reset()
         # compiled (or loaded) now: no_sample() is first called by a stale tick, mid-run
         detect(self.k, self.s.copy(), 0.0, 0.0, 1.0, 0.0, math.nan, math.nan, math.nan,
-               math.nan)
+               math.nan, 1.0)
         no_sample(self.k, self.s.copy())
 
     @classmethod
@@ -314,9 +317,9 @@ class FaultDetector:
 
     def update(self, z: float, innovation: float, S: float, pz: float = 0.0,
                pa: float = math.nan, pb: float = math.nan, w: float = math.nan,
-               i: float = math.nan) -> int:
+               i: float = math.nan, displacement: float = 1.0) -> int:
         return detect(self.k, self.s, float(z), float(innovation), float(S), float(pz),
-                      float(pa), float(pb), float(w), float(i))
+                      float(pa), float(pb), float(w), float(i), float(displacement))
 
     def tick_without_sample(self) -> int:
         return no_sample(self.k, self.s)

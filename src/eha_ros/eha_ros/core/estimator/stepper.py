@@ -443,8 +443,10 @@ def estimate(K, E, a, position, w, i, pa, pb):
     # the fault detector's pressures: each valid reading (one may be valid without the other)
     pa_ok = pa if use_p and reading_ok(k, pa) else math.nan
     pb_ok = pb if use_p and reading_ok(k, pb) else math.nan
+    # the shaft's p_D through the pump's displacement as learned (adapt_displacement's delta)
+    displacement = 1.0 + x[int(k.i_displacement)] if k.i_displacement >= 0 else 1.0
     fd.detect(k.detector, e.detector, position, innov, s00, pz, pa_ok, pb_ok,
-              w if i == i else math.nan, i)
+              w if i == i else math.nan, i, displacement)
     if k.isolate > 0.5 and fd.suspect(k.detector, e.detector):
         # a jump's first samples, until the detector's debounce decides: this update is
         # undone (isolate's predict only). Under a varying load the position noise is open
