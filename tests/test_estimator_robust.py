@@ -297,6 +297,24 @@ def test_one_valid_pressure_sensor_still_vetoes_a_jump():
     assert fd.JUMP in _jump_codes(jump, nan, pbs=nan)
 
 
+def _shaft_codes(innovations, speeds, currents, pa=math.nan, pb=10e5, sigma=30e-6,
+                 displacement=1.0):
+    """The detector's codes with the nominal plant's oil and torque balance for a sequence of
+    position innovations (m; innovation sigma ``sigma``), the active motor's speeds (rad/s)
+    and currents (A); pa, pb: each chamber's reading (Pa, NaN: rejected), one for every
+    sample or a list of one per sample; displacement: the learned D_p over the nominal."""
+    from eha_ros.core.sim.batch import nominal_params
+    p = nominal_params()['estimator']
+    det = fd.FaultDetector(1e-3, jump_debounce=3, jump_step=100e-6, jump_pressure_veto=8.0,
+                           pd_per_m=fd.pd_per_m(p), torque_balance=fd.torque_balance(p, 1e-3))
+    det.start(0.0)
+    n = len(innovations)
+    pas = pa if isinstance(pa, list) else [pa] * n
+    pbs = pb if isinstance(pb, list) else [pb] * n
+    return [det.update(1e-3 * k, y, sigma ** 2, 0.0, a, b, w, i, displacement)
+            for k, (y, w, i, a, b) in enumerate(zip(innovations, speeds, currents, pas, pbs))]
+
+
 def test_the_shaft_vetoes_a_jump_when_the_loaded_chambers_sensor_is_lost():
     """Chamber A's sensor below its range while the load compresses A: B sits on its check
     valve and does not move, but the pump's torque reaches the motor shaft within the tick.
@@ -311,26 +329,18 @@ def test_the_shaft_vetoes_a_jump_when_the_loaded_chambers_sensor_is_lost():
     k_T, b, J, D_p = (p['plant.motor.k_T'], p['plant.motor.b_eq'], p['plant.motor.J_eq'],
                       p['plant.pump.D_p'])
     assert tb == (k_T, b, J, D_p, 1e-3)
-
-    def codes(innovations, speeds, currents, pa=math.nan, pb=10e5):
-        det = fd.FaultDetector(1e-3, jump_debounce=3, jump_step=100e-6, jump_pressure_veto=8.0,
-                               pd_per_m=fd.pd_per_m(p), torque_balance=tb)
-        det.start(0.0)
-        return [det.update(1e-3 * k, y, 30e-6 ** 2, 0.0, pa, pb, w, i)
-                for k, (y, w, i) in enumerate(zip(innovations, speeds, currents))]
-
     step = [23e-6, -13e-6, 5e-6, -434e-6, -326e-6, -312e-6, -228e-6, -258e-6]
     load_w = [197.2, 201.1, 201.3, 199.4, 202.8, 238.0, 276.1, 312.0]
     load_i = [0.91, 3.96, 0.96, 4.63, 6.33, 37.84, 35.16, 34.57]
-    assert fd.JUMP not in codes(step, load_w, load_i)            # the shaft felt the load
+    assert fd.JUMP not in _shaft_codes(step, load_w, load_i)     # the shaft felt the load
     jump = [5e-6, -8e-6, -12e-6, 995e-6, 794e-6, 662e-6, 584e-6, 644e-6]
     jump_w = [1.4, -1.8, -0.9, 1.7, 2.3, -36.1, -78.5, -120.5]
     jump_i = [-1.06, -1.82, 0.88, 1.52, 0.18, -28.91, -35.51, -34.61]
-    assert fd.JUMP in codes(jump, jump_w, jump_i)                # the shaft did not
+    assert fd.JUMP in _shaft_codes(jump, jump_w, jump_i)         # the shaft did not
     # without a current (none sent, or the speed held): no veto by the shaft, as before
-    assert fd.JUMP in codes(step, load_w, [math.nan] * 8)
+    assert fd.JUMP in _shaft_codes(step, load_w, [math.nan] * 8)
     # both pressures valid: the measured p_D speaks, the shaft is not asked
-    assert fd.JUMP in codes(step, load_w, load_i, pa=30e5, pb=10e5)
+    assert fd.JUMP in _shaft_codes(step, load_w, load_i, pa=30e5, pb=10e5)
 
 
 def test_a_10kN_step_on_a_soft_oily_plant_is_no_sensor_jump_with_the_compensation():
@@ -370,8 +380,6 @@ def test_the_shaft_reads_p_d_through_the_displacement_the_estimator_learned():
     the estimator had learned delta = -0.207 by then. The step's innovation, 633 um, asks for
     28.0 bar; the shaft moved by 27.2 bar read with the nominal D_p (a jump, the safe state:
     the run failed), by 34.3 bar with the learned one (vetoed, passed)."""
-    from eha_ros.core.sim.batch import nominal_params
-    p = nominal_params()['estimator']
     nan = math.nan
     y = [-37.3, 15.1, -10.3, -1.05, 3.33, -630, -404, -380, -338, -307, -289]
     w = [248.4, 250.4, 252.9, 254.3, 253.5, 253.3, 254.1, 296.2, 340.4, 334.7, 319.4]
@@ -379,11 +387,8 @@ def test_the_shaft_reads_p_d_through_the_displacement_the_estimator_learned():
     pb = [9.447, 10.93, 9.908, 9.721, 11.54, nan, 9.827, 8.446, 8.841, 9.582, 9.479]
 
     def codes(displacement):
-        det = fd.FaultDetector(1e-3, jump_debounce=3, jump_step=100e-6, jump_pressure_veto=8.0,
-                               pd_per_m=fd.pd_per_m(p), torque_balance=fd.torque_balance(p, 1e-3))
-        det.start(0.0)
-        return [det.update(1e-3 * n, y[n] * 1e-6, 11.33e-6 ** 2, 0.0, nan, pb[n] * 1e5, w[n],
-                           i[n], displacement) for n in range(len(y))]
+        return _shaft_codes([v * 1e-6 for v in y], w, i, pb=[v * 1e5 for v in pb],
+                            sigma=11.33e-6, displacement=displacement)
 
     assert fd.JUMP in codes(1.0)                 # the nominal D_p: as before, the safe state
     assert fd.JUMP not in codes(1 - 0.207)       # the learned one: the shaft felt the load
