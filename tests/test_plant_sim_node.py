@@ -63,18 +63,18 @@ class Probe(probes.Probe):
         target = self.seq + n
         self.wait(lambda: self.seq >= target, timeout, f'plant stalled before {target}')
 
-    def hold(self, speed, seconds, between=None):
+    def hold(self, speed, seconds, after_each=None):
         """Command a speed every ~2 ms (as a controller would) for ``seconds`` of plant time,
-        each command followed by one of speed ``between`` if given."""
+        each command followed by one of speed ``after_each`` if given."""
         target = self.seq + int(seconds * 1000)
         end = time.monotonic() + 20 + 3 * seconds
         while self.seq < target and time.monotonic() < end:
             self.command(speed)
-            if between is not None:
-                self.command(between)
+            if after_each is not None:
+                self.command(after_each)
             time.sleep(0.002)
 
-    def hold_unbroken(self, speed, settle, seconds, attempts=3, between=None):
+    def hold_unbroken(self, speed, settle, seconds, attempts=3, after_each=None):
         """Hold ``speed`` (couple 0) for ``settle`` then ``seconds`` of plant time; the plant
         ticks (k0, k1) of the second part, on which the true motor speed stayed within 10 % of
         ``speed``. Commands go from this process: where it stalls, or the plant's executor does,
@@ -83,9 +83,9 @@ class Probe(probes.Probe):
         (``attempts`` at most). Each attempt starts at mid-stroke, so none ends on a stop."""
         for attempt in range(1, attempts + 1):
             self.center()
-            self.hold(speed, settle, between)
+            self.hold(speed, settle, after_each)
             n, k0 = len(self.sent), self.seq
-            self.hold(speed, seconds, between)
+            self.hold(speed, seconds, after_each)
             k1 = self.seq
             gap = np.max(np.diff(self.sent[n - 1:]))     # from the last command before k0
             w = self.truth_window(k0, k1)
@@ -307,7 +307,7 @@ def test_command_applied_gives_piston_speed_d_over_a(probe):
 def test_nan_command_rejected_last_good_held_and_reported(probe):
     # NaN after each good command (each NaN, if applied, would reach the state at once); the
     # counter sees what arrived (a keep-last queue may drop some of them under load)
-    k0, k1 = probe.hold_unbroken(50.0, 0.3, 0.2, between=float('nan'))
+    k0, k1 = probe.hold_unbroken(50.0, 0.3, 0.2, after_each=float('nan'))
     vel = np.array([t.velocity for t in probe.truth_window(k0, k1)])
     assert vel.size > 150 and np.all(np.isfinite(vel))
     assert np.median(vel) > 0.5 * 50 * D_P / A_P
