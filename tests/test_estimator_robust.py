@@ -504,6 +504,68 @@ def test_unmodelled_flow_holds_a_leak_the_adaptive_states_cannot_split():
     assert with_flow < 25e-6
 
 
+
+def test_the_hold_blend_judges_motion_on_the_pump_flow_velocity_over_rest_time():
+    """stepper.hold_blend, the weight of b in the published position, fed the 50 Hz pump-flow
+    velocity directly (rest_velocity 3 mm/s, rest_time 0.1 s, hold_blend_time 0.2 s)."""
+    from eha_ros.core.estimator import stepper
+    K, E = stepper.new_records()
+    k, e = K[0], E[0]
+    k['friction'][adapt.FK_VREST], k['friction'][adapt.FK_NREST] = 3e-3, 100
+    k['hold_rate'] = 1 / 200
+
+    def weights(v, loaded):
+        E[0] = np.zeros(1, stepper.STATE)[0]
+        out = []
+        for vk, lk in zip(v, np.broadcast_to(loaded, v.shape)):
+            e['friction'][adapt.FS_V] = vk
+            e['hold_weight'] = stepper.hold_blend(e, k, bool(lk))
+            out.append(e['hold_weight'])
+        return np.array(out)
+
+    t = np.arange(2000) * 1e-3
+    # a held load, the piston still, speed noise beyond rest_velocity on a third of the ticks
+    noisy = np.random.default_rng(1).normal(0.0, 3e-3, t.size)
+    w = weights(noisy, True)
+    assert np.mean(np.abs(noisy) > 3e-3) > 0.3
+    assert w[400:].min() == 1.0
+    # the 3 Hz, 3 mm sine under 10 kN (switch, motor_fail, pressure_*): never blended in
+    assert weights(57e-3 * np.cos(2 * np.pi * 3 * t), True).max() == 0.0
+    # the piston moves off at 10 mm/s under the held load: out after rest_time + the blend
+    w = weights(np.where(t < 1.0, noisy, 10e-3), True)
+    assert w[999] == 1.0 and w[t >= 1.5].max() == 0.0
+    # the load lets go: out over hold_blend_time
+    w = weights(noisy, t < 1.0)
+    assert w[999] == 1.0 and w[t >= 1.2].max() == 0.0
+
+
+def test_the_hold_blend_stays_in_while_speed_noise_crosses_rest_velocity():
+    """Issue 42, load_step on random:200, tuning seeds 1 and 2: 20 of the 24 failures were the
+    steady error against the sensor (20-98 um). The hold blend waited for the Stribeck input's
+    rest: the pump-flow velocity from the measured motor speed (low-passed at 50 Hz) below
+    rest_velocity (3 mm/s) for rest_time, and blended b out on every tick it was not. With
+    the speed sensor's noise at x1.2-2 it crosses 3 mm/s every few tens of ms: weight
+    0.36-0.64 over 3.5-4.5 s, 0.03-0.05 where the leakage model is off and v_f open (the
+    velocity's mean -2 mm/s). The blend now judges that velocity averaged over rest_time
+    (stepper.hold_blend). Seed 1 plant 55 (friction x1.8, noise x1.93): 28.8 um before, 1.9
+    um now; seed 2 plant 154 (C_eq x6.5, the external leakage x1.96 of its share): 98.3 um
+    before (b took the truth's drift, the truth 89 um off), 1.2 um now."""
+    from eha_ros.core.sim import campaign, scenarios
+    nominal = campaign.nominal_params()
+    scn = scenarios.load('load_step')
+    for row, seed in ((dict(C_eq=0.246, D_p=0.958, beta=1.034, k_T=1.002, k_E=1.071,
+                            friction=1.808, noise=1.928, leak_split=1.051),
+                       4109706526811917959),
+                      (dict(C_eq=6.463, D_p=1.026, beta=1.415, k_T=1.21, k_E=0.879,
+                            friction=0.949, noise=1.193, leak_split=1.958),
+                       5667862900036411438)):
+        figs = scenarios.run(scn, nominal, row, seed, trace=False)[0]
+        print(f'\nC_eq x{row["C_eq"]}: steady error against the sensor '
+              f'{figs["steady_error_m"] * 1e6:.1f} um, the truth\'s '
+              f'{figs["steady_error_truth_m"] * 1e6:.1f} um')
+        assert figs['steady_error_m'] < 10e-6
+
+
 LOAD_T = np.arange(6000) * 1e-3
 
 

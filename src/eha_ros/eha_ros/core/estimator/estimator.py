@@ -219,7 +219,7 @@ class Estimator:
         self.started = False
         self._saved = None
         self.omega_prev = self.w_fric = self.pd_meas = self.pd_filt = 0.0
-        self.E['updates'] = self.E['hold_weight'] = 0.0
+        self.E['updates'] = self.E['hold_weight'] = self.E['hold_v'] = self.E['hold_n'] = 0.0
         self.detector.reset()
         self.monitor_s[:] = 0.0
         self.flow_s[:] = 0.0

@@ -221,11 +221,13 @@ ESTIMATOR = Schema('estimator', [
               'frequency, which the sensor-offset state would otherwise take): the estimate '
               'follows the sensor at low frequency (issue 42: stiffness at C_eq x10)'),
     Param(E + 'model.hold_blend_time', 'float', 's', 0.2, 1e-3, 100.0,
-          doc='stage hold_blend: while the piston rests (rest_velocity, rest_time) under a held '
-              'load (the pressure difference beyond F_s (1 + phi_max) / A_p and not varying) '
-              'the published position is the sensor\'s reading without its white noise, x_hat '
-              '+ b: nothing observes b then, so the loop holds what the sensor reads (issue 42, '
-              'decision 2); b is blended in and out over this time'),
+          doc='stage hold_blend: while the piston rests (the pump-flow velocity averaged over '
+              'rest_time below rest_velocity for rest_time) under a held load (the pressure '
+              'difference beyond F_s (1 + phi_max) / A_p and not varying) the published '
+              'position is the sensor\'s reading without its white noise, x_hat + b: nothing '
+              'observes b then, so the loop holds what the sensor reads (issue 42, decision '
+              '2); b is blended in and out over this time, out once the load lets go or that '
+              'velocity stays beyond rest_velocity for rest_time'),
     Param(E + 'model.adapt_gate', 'float', '', 4.0, 0.0, 1e6,
           doc='no update of the adaptive states from a sample whose |position innovation| / '
               'sqrt(S) exceeds this (0: always): a fast transient the model cannot explain '

@@ -83,6 +83,8 @@ STATE = np.dtype([
     ('p_last', 'f8', (4,)),     # chamber filter: adapt.pressure_increments' state
     ('clipped', 'f8', (1,)),    # chamber filter: updates in a row that clipped a parameter
     ('hold_weight', 'f8'),      # weight of b in the published position (:func:`published`)
+    ('hold_v', 'f8'),           # the pump-flow velocity's mean over rest_time (m/s)
+    ('hold_n', 'f8'),           # ticks in a row |hold_v| is below (+) or beyond (-) rest_velocity
     ('friction', 'f8', (adapt.NFS,)),           # adapt.friction_input's
     ('noise', 'f8', (noise_level.NNS,)),        # noise_level's
     ('flow', 'f8', (adapt.NFLOW,)),             # adapt.flow_noise's
@@ -474,11 +476,11 @@ def estimate(K, E, a, position, w, i, pa, pb):
                        k.q_load + e.friction[adapt.FS_Q], k.q_load_jump)
         b_sigma = k.position_gm_sigma * e.noise[noise_level.NS_SX]
         adapt.load_variation(x, e.load, k.alpha_load[0], k.alpha_load[1])
+        held = not adapt.load_varying(e.load, k.dp_friction)
         rest = (k.stribeck > 0.5 and e.friction[adapt.FS_N] >= k.friction[adapt.FK_NREST]
-                and not adapt.load_varying(e.load, k.dp_friction))
-        # at rest under a held load (beyond what friction holds): publish x_hat + b
-        r = k.hold_rate if rest and abs(x[2] - x[3]) > k.dp_friction else -k.hold_rate
-        e.hold_weight = min(1.0, max(0.0, e.hold_weight + r))
+                and held)
+        e.hold_weight = hold_blend(e, k, k.stribeck > 0.5 and held
+                                   and abs(x[2] - x[3]) > k.dp_friction)
         adapt.flow_noise(
             Q, x, int(k.i_flow), int(k.i_gm), b_sigma, k.flow_gate, k.q_flow, rest, e.flow,
             k.flow_ticks, k.friction, k.dp_friction, k.flow_share, k.flow_report)
@@ -495,6 +497,29 @@ def leak_flow(K, x) -> float:
         return math.nan
     return adapt.leak_flow(x, int(k.i_leakage), int(k.i_external_leakage), k.C_x, k.C_r,
                            k.p_acc)
+
+
+@njit(cache=True)
+def hold_blend(e, k, loaded) -> float:
+    """The weight of b in the published position (:func:`published`). The piston's motion is
+    judged on the pump-flow velocity averaged over rest_time (hold_v; its 50 Hz low-pass
+    alone crosses rest_velocity on the speed sensor's noise): b is blended in while a held
+    load beyond what friction holds is on (``loaded``; the Stribeck input's velocity needed)
+    and |hold_v| has stayed below rest_velocity for rest_time, out once that load lets go or
+    varies, or |hold_v| has stayed beyond rest_velocity for rest_time."""
+    n_rest = k.friction[adapt.FK_NREST]
+    e.hold_v += (e.friction[adapt.FS_V] - e.hold_v) / max(n_rest, 1.0)
+    if abs(e.hold_v) < k.friction[adapt.FK_VREST]:
+        e.hold_n = max(e.hold_n, 0.0) + 1.0
+    else:
+        e.hold_n = min(e.hold_n, 0.0) - 1.0
+    if loaded and e.hold_n >= n_rest:
+        r = k.hold_rate
+    elif not loaded or e.hold_n <= -n_rest:
+        r = -k.hold_rate
+    else:
+        r = 0.0
+    return min(1.0, max(0.0, e.hold_weight + r))
 
 
 @njit(cache=True)
