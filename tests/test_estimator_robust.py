@@ -504,7 +504,6 @@ def test_unmodelled_flow_holds_a_leak_the_adaptive_states_cannot_split():
     assert with_flow < 25e-6
 
 
-
 def test_the_hold_blend_judges_motion_on_the_pump_flow_velocity_over_rest_time():
     """stepper.hold_blend, the weight of b in the published position, fed the 50 Hz pump-flow
     velocity directly (rest_velocity 3 mm/s, rest_time 0.1 s, hold_blend_time 0.2 s)."""
@@ -545,11 +544,11 @@ def test_the_hold_blend_stays_in_while_speed_noise_crosses_rest_velocity():
     rest: the pump-flow velocity from the measured motor speed (low-passed at 50 Hz) below
     rest_velocity (3 mm/s) for rest_time, and blended b out on every tick it was not. With
     the speed sensor's noise at x1.2-2 it crosses 3 mm/s every few tens of ms: weight
-    0.36-0.64 over 3.5-4.5 s, 0.03-0.05 where the leakage model is off and v_f open (the
-    velocity's mean -2 mm/s). The blend now judges that velocity averaged over rest_time
-    (stepper.hold_blend). Seed 1 plant 55 (friction x1.8, noise x1.93): 28.8 um before, 1.9
-    um now; seed 2 plant 154 (C_eq x6.5, the external leakage x1.96 of its share): 98.3 um
-    before (b took the truth's drift, the truth 89 um off), 1.2 um now."""
+    0.36-0.64 over 3.5-4.5 s after the step, 0.03-0.05 where the leakage model is off and
+    v_f open (the velocity's mean -2 mm/s). The blend now judges that velocity averaged over
+    rest_time (stepper.hold_blend). Seed 1 plant 55 (friction x1.8, noise x1.93): 28.8 um
+    before, 1.9 um now; seed 2 plant 154 (C_eq x6.5, the external leakage x1.96 of its
+    share): 98.3 um before (b took the truth's drift, the truth 89 um off), 1.2 um now."""
     from eha_ros.core.sim import campaign, scenarios
     nominal = campaign.nominal_params()
     scn = scenarios.load('load_step')
