@@ -518,7 +518,7 @@ def test_the_hold_blend_judges_motion_on_the_pump_flow_velocity_over_rest_time()
         out = []
         for vk, lk in zip(v, np.broadcast_to(loaded, v.shape)):
             e['friction'][adapt.FS_V] = vk
-            e['hold_weight'] = stepper.hold_blend(e, k, bool(lk))
+            stepper.hold_blend(e, k, bool(lk))
             out.append(e['hold_weight'])
         return np.array(out)
 

@@ -479,8 +479,7 @@ def estimate(K, E, a, position, w, i, pa, pb):
         held = not adapt.load_varying(e.load, k.dp_friction)
         rest = (k.stribeck > 0.5 and e.friction[adapt.FS_N] >= k.friction[adapt.FK_NREST]
                 and held)
-        e.hold_weight = hold_blend(e, k, k.stribeck > 0.5 and held
-                                   and abs(x[2] - x[3]) > k.dp_friction)
+        hold_blend(e, k, k.stribeck > 0.5 and held and abs(x[2] - x[3]) > k.dp_friction)
         adapt.flow_noise(
             Q, x, int(k.i_flow), int(k.i_gm), b_sigma, k.flow_gate, k.q_flow, rest, e.flow,
             k.flow_ticks, k.friction, k.dp_friction, k.flow_share, k.flow_report)
@@ -500,10 +499,11 @@ def leak_flow(K, x) -> float:
 
 
 @njit(cache=True)
-def hold_blend(e, k, loaded) -> float:
-    """The weight of b in the published position (:func:`published`). The piston's motion is
-    judged on the pump-flow velocity averaged over rest_time (hold_v; its 50 Hz low-pass
-    alone crosses rest_velocity on the speed sensor's noise): b is blended in while a held
+def hold_blend(e, k, loaded) -> None:
+    """One tick of e.hold_weight, the weight of b in the published position (:func:`published`;
+    hold_v and hold_n are its state). The piston's motion is judged on the pump-flow velocity
+    averaged over rest_time (hold_v; its 50 Hz low-pass alone crosses rest_velocity on the
+    speed sensor's noise): b is blended in while a held
     load beyond what friction holds is on (``loaded``; the Stribeck input's velocity needed)
     and |hold_v| has stayed below rest_velocity for rest_time, out once that load lets go or
     varies, or |hold_v| has stayed beyond rest_velocity for rest_time."""
@@ -519,7 +519,7 @@ def hold_blend(e, k, loaded) -> float:
         r = -k.hold_rate
     else:
         r = 0.0
-    return min(1.0, max(0.0, e.hold_weight + r))
+    e.hold_weight = min(1.0, max(0.0, e.hold_weight + r))
 
 
 @njit(cache=True)
