@@ -231,6 +231,7 @@ def detect(k, s, z, innovation, S, pz, pa, pb, w, i, displacement) -> int:
         s[FS_P1] = pa
     if pb == pb:
         s[FS_P1 + 1] = pb
+    # m += Ts / PV_MEAN_TIME (pv - m); restarted at the first pv after a sample without one
     if pv != pv or s[FS_PVM] != s[FS_PVM]:
         s[FS_PVM] = pv
     else:
