@@ -503,10 +503,10 @@ def hold_blend(e, k, loaded) -> None:
     """One tick of e.hold_weight, the weight of b in the published position (:func:`published`;
     hold_v and hold_n are its state). The piston's motion is judged on the pump-flow velocity
     averaged over rest_time (hold_v; its 50 Hz low-pass alone crosses rest_velocity on the
-    speed sensor's noise): b is blended in while a held
-    load beyond what friction holds is on (``loaded``; the Stribeck input's velocity needed)
-    and |hold_v| has stayed below rest_velocity for rest_time, out once that load lets go or
-    varies, or |hold_v| has stayed beyond rest_velocity for rest_time."""
+    speed sensor's noise): b is blended in while a held load beyond what friction holds is on
+    (``loaded``; the Stribeck input's velocity needed) and |hold_v| has stayed below
+    rest_velocity for rest_time, out once that load lets go or varies, or |hold_v| has stayed
+    beyond rest_velocity for rest_time."""
     n_rest = k.friction[adapt.FK_NREST]
     e.hold_v += (e.friction[adapt.FS_V] - e.hold_v) / max(n_rest, 1.0)
     if abs(e.hold_v) < k.friction[adapt.FK_VREST]:
