@@ -80,7 +80,7 @@ def breakdown(raw: str, wall: float, only: str | None = None) -> dict:
         by_stage[stage][own] += n
         total += n
     us = 1e6 / RATE / wall / TICK_HZ             # one sample in us per tick
-    return {'sampled_us_per_tick': total * us,
+    return {'samples': total, 'sampled_us_per_tick': total * us,
             'stages_us_per_tick': {k: v * us for k, v in stages.most_common()},
             'stage_share': {k: v / total for k, v in stages.most_common()} if total else {},
             'top_lines_us_per_tick': {k: v * us for k, v in lines.most_common(25)},

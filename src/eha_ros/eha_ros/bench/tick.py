@@ -25,11 +25,15 @@ from .profile import RATE, breakdown, py_spy
 from .stack import NODES
 
 WARMUP, TICKS, BLOCKS, PROFILE_TICKS = 2000, 20000, 10, 60000
+# fewest samples of the loop thread that make a per-stage breakdown (60,000 ticks give about
+# 4000 on an idle machine; py-spy falls behind on a busy one and keeps a few dozen)
+MIN_SAMPLES = 1000
 
 
-def _child(ticks: int) -> int:
+def _child(ticks: int, out: str) -> int:
     """eha_loop with the plant side's real-time loop replaced by ``ticks`` back-to-back ticks;
-    prints one JSON line."""
+    writes the figures as JSON to the file ``out`` (not stdout, which py-spy shares: its
+    "behind in sampling" lines broke the line the figures were printed on)."""
     from ..nodes import eha_loop, plant_side
     from ..stack import composed_command
     result = {}
@@ -58,23 +62,27 @@ def _child(ticks: int) -> int:
 
     plant_side.PlantSide.realtime_loop = loop
     rc = eha_loop.main(['eha_loop'] + composed_command(NODES)[1:])
-    print('BENCH_TICK ' + json.dumps(result), flush=True)
+    if result:
+        with open(out, 'w') as fh:
+            json.dump(result, fh)
     return rc
 
 
 def _run_child(ticks: int, spy: str | None = None, raw: str | None = None) -> dict:
-    cmd = [sys.executable, '-m', __name__, str(ticks)]
-    if spy:
-        # blocking (py-spy pauses the child per sample): a stack read while a 50 us tick runs
-        # on (--nonblocking) mixes frames of different calls
-        cmd = [spy, 'record', '--rate', str(RATE), '--threads', '--format', 'raw', '--output',
-               raw, '--'] + cmd
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-    line = next((x for x in r.stdout.splitlines() if x.startswith('BENCH_TICK ')), None)
-    if r.returncode != 0 or line is None:
-        tail = (r.stderr or r.stdout).strip().splitlines()[-3:]
-        raise RuntimeError(f'bench tick: the child failed ({r.returncode}): {tail}')
-    return json.loads(line.split(' ', 1)[1])
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, 'tick.json')
+        cmd = [sys.executable, '-m', __name__, str(ticks), out]
+        if spy:
+            # blocking (py-spy pauses the child per sample): a stack read while a 50 us tick
+            # runs on (--nonblocking) mixes frames of different calls
+            cmd = [spy, 'record', '--rate', str(RATE), '--threads', '--format', 'raw',
+                   '--output', raw, '--'] + cmd
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        if r.returncode != 0 or not os.path.exists(out):
+            tail = (r.stderr or r.stdout).strip().splitlines()[-3:]
+            raise RuntimeError(f'bench tick: the child failed ({r.returncode}): {tail}')
+        with open(out) as fh:
+            return json.load(fh)
 
 
 def run(args) -> dict:
@@ -89,13 +97,19 @@ def run(args) -> dict:
             text = fh.read()
     # the loop thread's samples only; each stage as its share of the best block's tick
     shares = breakdown(text, 1.0, only='PlantSide.loop ')
+    result['profile_samples'] = shares['samples']
+    result['profiled_us_per_tick_median'] = prof['us_per_tick_median']
+    if shares['samples'] < MIN_SAMPLES:
+        print(f'bench tick: py-spy kept {shares["samples"]} samples of the loop thread (at '
+              f'least {MIN_SAMPLES} make a breakdown; it falls behind on a busy machine): no '
+              f'per-stage figures written, the tick figures above stand', file=sys.stderr)
+        return result
     tick_us, total = result['us_per_tick_best'], shares['sampled_us_per_tick'] or 1.0
     result['stage_share'] = shares['stage_share']
     result['stages_us_per_tick'] = {k: v * tick_us for k, v in shares['stage_share'].items()}
     result['stage_top_frames_us_per_tick'] = {
         k: {f: v / total * tick_us for f, v in frames.items()}
         for k, frames in shares['stage_top_frames_us_per_tick'].items()}
-    result['profiled_us_per_tick_median'] = prof['us_per_tick_median']
     for name, us in result['stages_us_per_tick'].items():
         print(f'  {us:6.1f} us  {100 * result["stage_share"][name]:5.1f} %  {name}',
               file=sys.stderr)
@@ -103,4 +117,4 @@ def run(args) -> dict:
 
 
 if __name__ == '__main__':
-    sys.exit(_child(int(sys.argv[1])))
+    sys.exit(_child(int(sys.argv[1]), sys.argv[2]))
