@@ -1120,7 +1120,7 @@ def riccati_ratio(params, c_eq: float, q_force: float) -> float:
 def test_force_model_bounds_the_sine_ratio_on_leaky_plants(params):
     """Why the chamber filter models the piston friction (adapt.friction_input) instead of
     eq. 4.36 plus a fast force random walk: on a C_eq x10 plant every newton of unmodelled
-    force is 0.57 mm/s of modelled velocity, and even with the plant's TRUE parameters no
+    force is 5.7 um/s of modelled velocity, and even with the plant's TRUE parameters no
     linear filter gets the 1 Hz sine RMSE ratio under issue 15's 0.5 while the force walks at
     the old 100 N^2 per tick; with the force modelled (the walk 1e-4 N^2) it can."""
     fast = riccati_ratio(params, 10.0, 100.0)

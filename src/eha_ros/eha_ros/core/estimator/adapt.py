@@ -178,7 +178,7 @@ def friction_input(fk, fs, x, omega) -> float:
     (F_c / (v_s / 10) = 1.5e5 N s/m against m_p = 2 kg), evaluated at a state it feeds back
     within one tick; the pump flow is an input. Why this model and not eq. 4.36's sign with a
     fast force random walk: with the leakage of C_eq x10 every newton of unmodelled piston
-    force is 0.57 mm/s of modelled velocity (C F / A_p^2), and the force noise then bounds
+    force is 5.7 um/s of modelled velocity (C F / A_p^2), and the force noise then bounds
     the 1 Hz sine RMSE ratio at 0.61 even with the plant's true parameters (steady-state
     Riccati, tests/test_estimator_robust.py); with this curve and a slow force walk it is
     0.4.

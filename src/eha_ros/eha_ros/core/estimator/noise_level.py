@@ -3,7 +3,7 @@
 Why: a real sensor's noise is not its datasheet's (cabling, supply, EMI). With the pressure
 sensors noisier than R says, their innovations, normalised by that R, pass the load-step test
 of the force state (adapt.maneuver, 5 sigma) on noise alone, and every such sample lets the
-force state jump; on a leaky plant each newton of it is 0.57 mm/s of modelled velocity. On the
+force state jump; on a leaky plant each newton of it is 5.7 um/s of modelled velocity. On the
 random family (every sensor noise x1..2) the 1 Hz sine RMSE ratio reached 1.41, 39 of 200
 plants above 0.5; with R matched to the true noise 1 of 200, and keeping the load-step test in
 datasheet units (5 x 0.316 bar) while R is measured brought it back to 43 (so that test is
