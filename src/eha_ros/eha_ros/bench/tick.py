@@ -25,8 +25,8 @@ from .profile import RATE, breakdown, py_spy
 from .stack import NODES
 
 WARMUP, TICKS, BLOCKS, PROFILE_TICKS = 2000, 20000, 10, 60000
-# fewest samples of the loop thread that make a per-stage breakdown (60,000 ticks give about
-# 4000 on an idle machine; py-spy falls behind on a busy one and keeps a few dozen)
+# fewest samples of the loop thread that make a per-stage breakdown (60,000 ticks gave 3047
+# beside a campaign; py-spy falls further behind on a busier machine and keeps a few dozen)
 MIN_SAMPLES = 1000
 
 
