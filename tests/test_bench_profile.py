@@ -60,7 +60,7 @@ def _fake_children(monkeypatch, raw_text):
     """bench tick's two children replaced: the tick figures, and py-spy's raw file (the loop
     thread's entry is the child's back-to-back loop)."""
     from eha_ros.bench import tick
-    raw_text = raw_text.replace('PlantSide.realtime_loop ', 'PlantSide.loop ')
+    raw_text = raw_text.replace('PlantSide.realtime_loop ', tick.LOOP_THREAD)
 
     def child(ticks, spy=None, raw=None):
         if raw is not None:

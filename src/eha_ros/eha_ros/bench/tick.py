@@ -28,6 +28,7 @@ WARMUP, TICKS, BLOCKS, PROFILE_TICKS = 2000, 20000, 10, 60000
 # fewest samples of the loop thread that make a per-stage breakdown (60,000 ticks gave 3047
 # beside a campaign; py-spy falls further behind on a busier machine and keeps a few dozen)
 MIN_SAMPLES = 1000
+LOOP_THREAD = 'PlantSide.loop '    # py-spy's frame text of the loop thread's samples
 
 
 def _child(ticks: int, out: str) -> int:
@@ -96,7 +97,7 @@ def run(args) -> dict:
         with open(raw) as fh:
             text = fh.read()
     # the loop thread's samples only; each stage as its share of the best block's tick
-    shares = breakdown(text, 1.0, only='PlantSide.loop ')
+    shares = breakdown(text, 1.0, only=LOOP_THREAD)
     result['profile_samples'] = shares['samples']
     result['profiled_us_per_tick_median'] = prof['us_per_tick_median']
     if shares['samples'] < MIN_SAMPLES:
@@ -104,7 +105,7 @@ def run(args) -> dict:
               f'least {MIN_SAMPLES} make a breakdown; it falls behind on a busy machine): no '
               f'per-stage figures written, the tick figures above stand', file=sys.stderr)
         return result
-    tick_us, total = result['us_per_tick_best'], shares['sampled_us_per_tick'] or 1.0
+    tick_us, total = result['us_per_tick_best'], shares['sampled_us_per_tick']
     result['stage_share'] = shares['stage_share']
     result['stages_us_per_tick'] = {k: v * tick_us for k, v in shares['stage_share'].items()}
     result['stage_top_frames_us_per_tick'] = {
