@@ -494,6 +494,27 @@ def test_cli_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, why
     assert not out.exists()
 
 
+def test_a_set_summary_keeps_a_fault_never_detected_as_its_worst(tmp_path):
+    """A detection time of inf (the fault never detected) is the worst figure there is: the
+    set's summary reports it, whichever seed it is on (it once took the worst finite one of
+    the other seeds and left the seed with the never-detected run out)."""
+    from eha_ros.core.sim import campaign_set as CS
+    specs = {'detection_time_s': {'max': 0.05}}
+    folders = {}
+    for seed, times in ((1, [0.004, 0.03]), (2, [0.004, float('inf')])):
+        d = tmp_path / f'sensor_fault-seed{seed}'
+        d.mkdir()
+        pd.DataFrame({'run_id': [0, 1], 'detection_time_s': times,
+                      'passed': [t <= 0.05 for t in times],
+                      'failed_specs': ['' if t <= 0.05 else 'detection_time_s'
+                                       for t in times]}).to_parquet(d / 'results.parquet')
+        (d / 'campaign.json').write_text(json.dumps({'scenario': {'specs': specs}}))
+        folders[('sensor_fault', seed)] = str(d)
+    worst = CS.summarize(folders, 'thesis')['scenarios']['sensor_fault']['specs']
+    w = worst['detection_time_s']
+    assert w['worst'] == float('inf') and w['seed'] == 2 and w['run'] == 1 and w['failed'] == 1
+
+
 def test_cli_runs_scenarios_on_seeds_as_a_set(tmp_path):
     """Several scenarios on --seeds: one campaign folder each, summary.md / .json with the runs
     passed per seed and the worst seed, seed roles (101-105 held out); the same command again

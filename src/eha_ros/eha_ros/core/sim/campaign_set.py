@@ -132,7 +132,8 @@ def summarize(folders: dict, family: str) -> dict:
                                                              worst=None, seed=None, run=None,
                                                              failed=0))
                 w['failed'] += s['failed']
-                if math.isfinite(s['worst']) and (w['worst'] is None or _worse(
+                # inf is a value (a fault never detected, the worst there is); NaN is none
+                if not math.isnan(s['worst']) and (w['worst'] is None or _worse(
                         s['worst'], w['worst'], specs[s['metric']])):
                     w.update(worst=s['worst'], seed=seed, run=s['worst_run'])
             for r in df[~df['passed'].astype(bool)].to_dict('records'):
