@@ -25,9 +25,10 @@ from ..io.report import write_json
 STAGES = {stage: {'estimator.stages': [s for s in DEFAULT_STAGES if s != stage]}
           for stage in DEFAULT_STAGES if ESTIMATOR_STAGES[stage].structure in (None, 'chambers')}
 BASE = 'all_on'
-# the scenarios: what the estimator is for (tracking, load, stiffness) and its faults
+# the scenarios: what the estimator is for (tracking, load, stiffness) and its faults,
+# and since 2026-12-01 drift_loaded (a sensor drift under a held load: the flow state's report)
 SCENARIOS = ('step', 'load_step', 'sine', 'stiffness', 'sensor_fault', 'sensor_stuck',
-             'false_alarm')
+             'false_alarm', 'drift_loaded')
 
 
 def parse_stages(text: str | None) -> list[str]:

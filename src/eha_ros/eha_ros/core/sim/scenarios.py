@@ -57,10 +57,10 @@ KINDS = {
     # Table 3.4: 3 Hz 3 mm sine, 10 kN load step at 1 s, commanded switch to B at 3 s
     'switch': dict(amplitude=3e-3, freq=3.0, load=10e3, load_time=1.0, switch_time=3.0,
                    duration=4.0),
-    # sensor fault while holding 0 (or tracking a sine): detection time of the estimator,
-    # false alarms before it
+    # sensor fault while holding 0 (or tracking a sine; under a load held from load_time):
+    # detection time of the estimator, the first report of the fault, false alarms before it
     'sensor_fault': dict(fault='msp_bias', magnitude=1e-3, t_fault=2.0, duration=3.0,
-                         amplitude=0.0, freq=1.0),
+                         amplitude=0.0, freq=1.0, load=0.0, load_time=0.0),
     # a plant fault (core.plant.faults; on couple A) during the Table 3.4 sine under load: the
     # active couple's motor (the switch manager hands over to B), or a chamber pressure sensor
     'motor_fail': dict(amplitude=3e-3, freq=3.0, load=10e3, load_time=1.0, t_fault=2.0,
@@ -278,6 +278,7 @@ def signals(scn: Scenario, Ts: float):
             faults.append((p['t_fault'], (p['fault'], 0, p['magnitude'], 0.0)))
     elif kind == 'sensor_fault':
         ref[:] = p['amplitude'] * np.sin(2 * np.pi * p['freq'] * t)
+        load[t >= p['load_time'] - 1e-9] = p['load']
         faults.append((p['t_fault'], (p['fault'], 0, p['magnitude'], 0.0)))
     return ref, load, faults, commands
 
@@ -287,8 +288,8 @@ def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool 
     """One run; returns (figures dict, decimated traces dict or None).
 
     multipliers: one family row (core.sim.family.COLUMNS; other keys are ignored)."""
-    from .closed_loop import (R_ACTIVE, R_EN, R_FAULT, R_GM, R_STATE, R_U, R_VALVE, R_X0,
-                              R_XHAT, R_XM)
+    from .closed_loop import (R_ACTIVE, R_EN, R_FAULT, R_GM, R_STATE, R_U, R_VALVE, R_VERDICT,
+                              R_X0, R_XHAT, R_XM)
     from .batch import build_loop
     from .switchover import schedule
     from .family import plant_params
@@ -306,7 +307,7 @@ def run(scn: Scenario, nominal: dict, multipliers: dict, seed: int, trace: bool 
     t = np.arange(n) * Ts
     sig = dict(t=t, reference=ref, load=load, truth=rec[R_X0], estimate=rec[R_XHAT],
                measured=rec[R_XM], sensor_lf=rec[R_X0] + rec[R_GM], command=rec[R_U],
-               fault=rec[R_FAULT],
+               fault=rec[R_FAULT], verdict=rec[R_VERDICT],
                active=rec[R_ACTIVE], state=rec[R_STATE], valve=rec[R_VALVE:R_VALVE + 2],
                enable=rec[R_EN:R_EN + 2] > 0.5,
                sensor_noise=(plant['plant.sensors.position_sigma'],
@@ -491,19 +492,28 @@ def motor_fail_figures(s, p, Ts):
 def sensor_fault_figures(s, p, Ts):
     """Estimator's detection time of the injected sensor fault (inf: none; a fault at or after
     the run's end is never injected: false_alarm), false alarms before it (a fault code or the
-    safe state); the safe state (core.loop.safe_state): time from the fault to the hydraulic lock
-    (switch manager FAILED_SAFE, both couples' valves closed) and the piston's drift from
-    then to the end of the run."""
+    safe state); the first report of it, a fault code or a consistency verdict other than ok
+    (adapt.VERDICTS: a drift under a held load is the monitor's model_mismatch, not the
+    detector's), and the ticks with such a verdict before the fault; the safe state
+    (core.loop.safe_state): time from the fault to the hydraulic lock (switch manager
+    FAILED_SAFE, both couples' valves closed) and the piston's drift from then to the end of
+    the run."""
+    from ..estimator.adapt import OK
     from ..redundancy.state_machine import STATE_CODES
     t, code = s['t'], s['fault']
     before = t < p['t_fault'] - 1e-9
     hits = np.nonzero((~before) & (code != 0))[0]
+    said = s['verdict'] != OK
+    reports = np.nonzero((~before) & ((code != 0) | said))[0]
     err = np.abs(s['truth'][~before] - s['reference'][~before])
     safe = s['state'] == STATE_CODES['FAILED_SAFE']
     locked = np.nonzero((~before) & safe & np.all(s['valve'] <= 0.01, axis=0))[0]
     lock = locked[0] if len(locked) else None
     return {'detection_time_s': float(t[hits[0]] - p['t_fault'] + Ts) if len(hits) else math.inf,
             'false_alarm_ticks': float(np.count_nonzero((code[before] != 0) | safe[before])),
+            'report_time_s': float(t[reports[0]] - p['t_fault'] + Ts) if len(reports)
+            else math.inf,
+            'report_ticks_before': float(np.count_nonzero(said[before])),
             'peak_deviation_m': float(np.max(err)) if len(err) else math.nan,
             'safe_state_s': float(t[lock] - p['t_fault'] + Ts) if lock is not None else math.inf,
             'lock_drift_m': float(abs(s['truth'][-1] - s['truth'][lock])) if lock is not None
