@@ -502,17 +502,20 @@ def sensor_fault_figures(s, p, Ts):
     from ..redundancy.state_machine import STATE_CODES
     t, code = s['t'], s['fault']
     before = t < p['t_fault'] - 1e-9
-    hits = np.nonzero((~before) & (code != 0))[0]
+
+    def since(cond) -> float:
+        """From the fault to the first tick at or after it where cond holds (inf: none)."""
+        i = np.nonzero((~before) & cond)[0]
+        return float(t[i[0]] - p['t_fault'] + Ts) if len(i) else math.inf
+
     said = s['verdict'] != OK
-    reports = np.nonzero((~before) & ((code != 0) | said))[0]
     err = np.abs(s['truth'][~before] - s['reference'][~before])
     safe = s['state'] == STATE_CODES['FAILED_SAFE']
     locked = np.nonzero((~before) & safe & np.all(s['valve'] <= 0.01, axis=0))[0]
     lock = locked[0] if len(locked) else None
-    return {'detection_time_s': float(t[hits[0]] - p['t_fault'] + Ts) if len(hits) else math.inf,
+    return {'detection_time_s': since(code != 0),
             'false_alarm_ticks': float(np.count_nonzero((code[before] != 0) | safe[before])),
-            'report_time_s': float(t[reports[0]] - p['t_fault'] + Ts) if len(reports)
-            else math.inf,
+            'report_time_s': since((code != 0) | said),
             'report_ticks_before': float(np.count_nonzero(said[before])),
             'peak_deviation_m': float(np.max(err)) if len(err) else math.nan,
             'safe_state_s': float(t[lock] - p['t_fault'] + Ts) if lock is not None else math.inf,
